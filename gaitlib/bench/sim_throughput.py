@@ -1,0 +1,137 @@
+"""Simulation throughput: a backend's control steps per second against plain MuJoCo C in the same run.
+
+The reference (``raw``) advances the same number of worlds, from the same settled in-contact standing states,
+with the same substeps and thread count, and none of gaitlib's work: the faster of
+
+* ``mj_step`` over persistent per-world ``MjData`` in a thread pool (keeps the solver warm start), and
+* ``mujoco.rollout`` with a persistent thread pool, chained call to call (each call starts the solver cold).
+
+Backend and references are timed in alternating rounds so that a change of machine load hits both alike.
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+
+from gaitlib.sim import SimBackend
+
+__all__ = ["ThroughputResult", "measure_throughput"]
+
+
+@dataclass(frozen=True)
+class ThroughputResult:
+    """Control steps per second (all worlds together) of a backend and of plain MuJoCo C."""
+
+    backend: str
+    """Backend measured."""
+    device: str
+    """Torch device of the backend."""
+    worlds: int
+    """Number of worlds N."""
+    threads: int
+    """CPU threads used by the references (and by the ``mujoco`` backend)."""
+    control_hz: float
+    """Control rate, Hz."""
+    substeps: int
+    """Physics steps per control step."""
+    seconds: float
+    """Wall-clock time spent on each side, s."""
+    env_steps_per_s: float
+    """Backend: control steps per second over all worlds (set targets, step, read state)."""
+    raw_steps_per_s: float
+    """Plain MuJoCo C: control steps per second over all worlds, the faster reference."""
+    raw_mj_step_per_s: float
+    """Reference 1: ``mj_step`` over persistent ``MjData`` in a thread pool."""
+    raw_rollout_per_s: float
+    """Reference 2: chained ``mujoco.rollout`` calls."""
+    ratio: float
+    """``env_steps_per_s / raw_steps_per_s``."""
+
+    def as_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rounds: int = 4) -> ThroughputResult:
+    """Time ``backend`` and the plain MuJoCo C references for about ``seconds`` each (s)."""
+    import mujoco
+    from mujoco import rollout
+
+    from gaitlib.sim.mujoco_backend import load_model
+
+    n = backend.num_worlds
+    targets = torch.tensor(backend.robot.default_joint_pos, device=backend.device).repeat(n, 1)
+    backend.set_pd_targets(targets)
+    for _ in range(int(backend.robot.control_hz)):  # settle 1 s into ground contact
+        backend.step()
+    settled = backend.state()
+    qpos = torch.cat([settled.root_pos, settled.root_quat, settled.joint_pos], 1).double().cpu().numpy()
+    qvel = torch.cat([settled.root_lin_vel, settled.root_ang_vel, settled.joint_vel], 1).double().cpu().numpy()
+
+    model = load_model(backend.robot)
+    datas = [mujoco.MjData(model) for _ in range(n)]
+    for d, qp, qv in zip(datas, qpos, qvel, strict=True):
+        d.qpos[:], d.qvel[:], d.ctrl[:] = qp, qv, qp[7:]
+        mujoco.mj_forward(model, d)
+    bounds = np.linspace(0, n, threads + 1).astype(int)
+    chunks = [range(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True) if hi > lo]
+    pool = ThreadPoolExecutor(len(chunks))
+    substeps = backend.robot.substeps
+
+    def step_chunk(worlds: range) -> None:
+        for i in worlds:
+            mujoco.mj_step(model, datas[i], substeps)
+
+    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    roll_state = np.empty((n, mujoco.mj_stateSize(model, spec)))
+    for i, d in enumerate(datas):
+        mujoco.mj_getState(model, d, roll_state[i], spec)
+    roll_control = np.repeat(qpos[:, None, 7:], substeps, axis=1)
+    roll_datas = [mujoco.MjData(model) for _ in range(threads)]
+    roller = rollout.Rollout(nthread=threads)
+
+    def run_backend() -> None:
+        backend.set_pd_targets(targets)
+        backend.step()
+        backend.state()
+
+    def run_mj_step() -> None:
+        list(pool.map(step_chunk, chunks))
+
+    def run_rollout() -> None:
+        nonlocal roll_state
+        out, _ = roller.rollout([model] * n, roll_datas, roll_state, roll_control, nstep=substeps)
+        roll_state = out[:, -1]
+
+    runners = {"env": run_backend, "mj_step": run_mj_step, "rollout": run_rollout}
+    steps = dict.fromkeys(runners, 0)
+    elapsed = dict.fromkeys(runners, 0.0)
+    with roller:
+        for _ in range(rounds):
+            for key, run in runners.items():
+                start = time.perf_counter()
+                while time.perf_counter() - start < seconds / rounds:
+                    run()
+                    steps[key] += n
+                elapsed[key] += time.perf_counter() - start
+    pool.shutdown()
+    rate = {key: steps[key] / elapsed[key] for key in runners}
+    raw = max(rate["mj_step"], rate["rollout"])
+    return ThroughputResult(
+        backend=backend.name,
+        device=str(backend.device),
+        worlds=n,
+        threads=threads,
+        control_hz=backend.robot.control_hz,
+        substeps=substeps,
+        seconds=seconds,
+        env_steps_per_s=rate["env"],
+        raw_steps_per_s=raw,
+        raw_mj_step_per_s=rate["mj_step"],
+        raw_rollout_per_s=rate["rollout"],
+        ratio=rate["env"] / raw,
+    )

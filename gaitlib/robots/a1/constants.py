@@ -1,0 +1,86 @@
+"""Unitree A1 constants: the one place every other module takes the robot's numbers from.
+
+Each number cites its source: ``facts`` is ``shared/docs/a1_facts.md`` (Unitree's public URDF, as also used by
+MuJoCo Menagerie and motion_imitation); ``paper`` is Christmann et al., Table 1; ``choice`` is gaitlib's own,
+with the reason beside it. Units are SI (m, kg, rad, N·m, s). Body frame: x forward, y left, z up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = [
+    "ABDUCTION_LIMITS",
+    "CALF_LIMITS",
+    "CONTROL_HZ",
+    "DEFAULT_JOINT_POS",
+    "FOOT_NAMES",
+    "FOOT_RADIUS",
+    "HIP_OFFSETS",
+    "JOINT_LOWER",
+    "JOINT_NAMES",
+    "JOINT_UPPER",
+    "KD_DEFAULT",
+    "KD_RANGE",
+    "KP_DEFAULT",
+    "KP_RANGE",
+    "LEG_NAMES",
+    "LINK_LENGTH",
+    "MJCF_PATH",
+    "NUM_JOINTS",
+    "NUM_LEGS",
+    "PHYSICS_DT",
+    "STANDING_HEIGHT",
+    "SUBSTEPS",
+    "THIGH_LIMITS",
+    "THIGH_OFFSET_Y",
+    "TORQUE_LIMIT",
+    "TOTAL_MASS",
+    "TRUNK_BODY",
+]
+
+MJCF_PATH: Path = Path(__file__).with_name("a1.xml")
+"""The project's own A1 MJCF (primitive collision shapes, position actuators, foot contact sensors)."""
+
+LEG_NAMES: tuple[str, ...] = ("FR", "FL", "RR", "RL")  # facts: leg order used everywhere
+NUM_LEGS: int = 4
+JOINT_NAMES: tuple[str, ...] = tuple(
+    f"{leg}_{part}_joint" for leg in LEG_NAMES for part in ("hip", "thigh", "calf")
+)  # facts: per leg (hip abduction, thigh, calf)
+NUM_JOINTS: int = 12
+FOOT_NAMES: tuple[str, ...] = tuple(f"{leg}_foot" for leg in LEG_NAMES)  # MJCF body, geom and site names
+TRUNK_BODY: str = "trunk"
+
+# Kinematics (facts).
+HIP_OFFSETS: tuple[tuple[float, float, float], ...] = (
+    (0.183, -0.047, 0.0),  # FR hip joint in the trunk frame
+    (0.183, 0.047, 0.0),  # FL
+    (-0.183, -0.047, 0.0),  # RR
+    (-0.183, 0.047, 0.0),  # RL
+)
+THIGH_OFFSET_Y: tuple[float, ...] = (-0.08505, 0.08505, -0.08505, 0.08505)  # thigh joint from hip joint, y
+LINK_LENGTH: float = 0.2  # thigh and calf length, m
+FOOT_RADIUS: float = 0.02  # contact sphere radius, m
+
+# Joint limits, rad (facts).
+ABDUCTION_LIMITS: tuple[float, float] = (-0.802851, 0.802851)
+THIGH_LIMITS: tuple[float, float] = (-1.0472, 4.18879)
+CALF_LIMITS: tuple[float, float] = (-2.69653, -0.916298)
+JOINT_LOWER: tuple[float, ...] = (ABDUCTION_LIMITS[0], THIGH_LIMITS[0], CALF_LIMITS[0]) * NUM_LEGS
+JOINT_UPPER: tuple[float, ...] = (ABDUCTION_LIMITS[1], THIGH_LIMITS[1], CALF_LIMITS[1]) * NUM_LEGS
+
+DEFAULT_JOINT_POS: tuple[float, ...] = (0.0, 0.9, -1.8) * NUM_LEGS  # facts: default standing pose, rad
+STANDING_HEIGHT: float = 0.2686  # trunk height with DEFAULT_JOINT_POS and feet on the ground (forward kinematics), m
+TOTAL_MASS: float = 12.453  # facts: sum of the link masses, kg
+
+# Actuation.
+TORQUE_LIMIT: float = 33.5  # facts: motor torque limit per joint, N·m
+KP_RANGE: tuple[float, float] = (45.0, 75.0)  # paper Table 1: PD stiffness, N·m/rad
+KD_RANGE: tuple[float, float] = (0.9, 1.8)  # paper Table 1: PD damping, N·m·s/rad
+KP_DEFAULT: float = 60.0  # choice: middle of KP_RANGE, used when nothing is randomized
+KD_DEFAULT: float = 1.35  # choice: middle of KD_RANGE
+
+# Timing.
+CONTROL_HZ: float = 30.0  # paper: policy rate, Hz
+SUBSTEPS: int = 8  # choice: physics steps per control step
+PHYSICS_DT: float = 1.0 / (CONTROL_HZ * SUBSTEPS)  # 1/240 s, as in the MJCF <option timestep>

@@ -1,0 +1,51 @@
+"""``gaitlib bench sim`` end to end, through the console entry point."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+EXPECTED_KEYS = {"backend", "worlds", "control_hz", "substeps", "env_steps_per_s", "raw_steps_per_s", "ratio"}
+
+
+def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_bench_sim_prints_one_json_object() -> None:
+    result = gaitlib("bench", "sim", "--backend", "mujoco", "--worlds", "8", "--seconds", "0.4", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert EXPECTED_KEYS <= report.keys()
+    assert report["backend"] == "mujoco" and report["worlds"] == 8 and report["substeps"] == 8
+    assert report["env_steps_per_s"] > 0 and report["raw_steps_per_s"] > 0
+    assert report["ratio"] == report["env_steps_per_s"] / report["raw_steps_per_s"]
+
+
+def test_unknown_backend_is_one_error_line() -> None:
+    result = gaitlib("bench", "sim", "--backend", "bullet", "--worlds", "2")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        "gaitlib: error: unknown backend 'bullet' (known: auto, mujoco, newton)"
+    ]
+
+
+def test_zero_worlds_is_one_error_line() -> None:
+    result = gaitlib("bench", "sim", "--worlds", "0")
+    assert result.returncode == 2
+    assert result.stderr.strip() == "gaitlib: error: need at least one world, got 0"
+
+
+def test_help_lists_only_working_commands() -> None:
+    result = gaitlib("--help")
+    assert result.returncode == 0
+    panel = result.stdout.split("Commands")[1]
+    listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))
+    assert listed == {"bench"}
