@@ -1,0 +1,272 @@
+"""Reference clips: a robot motion stored as frames on a uniform phase grid, read back at any phase.
+
+A clip holds ``K + 1`` frames at phases ``k / K`` (k = 0..K), so the first and last frames bracket the whole clip.
+A looping clip repeats with period :attr:`ReferenceClip.period`: its last frame is its first frame shifted by
+:attr:`ReferenceClip.cycle_displacement`, so joint angles and velocities wrap seamlessly and the trunk advances by
+that displacement per cycle. A non-looping clip holds its end frames outside [0, 1].
+
+Frames are linearly interpolated (the orientation by normalized linear interpolation); contact flags come from
+the nearest frame. Units SI; the world frame is z up; quaternions are (w, x, y, z), trunk to world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from gaitlib.gaits.kinematics import forward_kinematics
+from gaitlib.gaits.quaternions import quat_conjugate, quat_multiply, quat_rotate, quat_to_rotation_vector
+from gaitlib.robots.a1.constants import NUM_JOINTS, NUM_LEGS
+
+__all__ = ["ClipFrame", "ReferenceClip"]
+
+
+@dataclass
+class ClipFrame:
+    """Reference quantities of N robots, each at its own phase (``torch.float32`` unless noted)."""
+
+    root_pos: torch.Tensor
+    """(N, 3) trunk position in the world frame, m, counting whole cycles of a looping clip."""
+    root_quat: torch.Tensor
+    """(N, 4) trunk orientation (w, x, y, z), trunk to world."""
+    root_lin_vel: torch.Tensor
+    """(N, 3) trunk linear velocity in the world frame, m/s."""
+    root_ang_vel: torch.Tensor
+    """(N, 3) trunk angular velocity in the trunk frame, rad/s."""
+    joint_pos: torch.Tensor
+    """(N, 12) joint angles in :data:`~gaitlib.robots.a1.constants.JOINT_NAMES` order, rad."""
+    joint_vel: torch.Tensor
+    """(N, 12) joint velocities, rad/s."""
+    foot_pos_local: torch.Tensor
+    """(N, 4, 3) foot contact-sphere centres in the trunk frame, leg order FR, FL, RR, RL, m."""
+    foot_pos_world: torch.Tensor
+    """(N, 4, 3) foot contact-sphere centres in the world frame, m."""
+    contact: torch.Tensor
+    """(N, 4) ``torch.bool``: the foot is on the ground."""
+
+    @property
+    def root_height(self) -> torch.Tensor:
+        """(N,) trunk height above the ground, m."""
+        return self.root_pos[:, 2]
+
+
+# Columns of the interpolation table, in order, with their per-frame widths.
+_TABLE_FIELDS = (
+    ("root_pos", 3),
+    ("root_quat", 4),
+    ("root_lin_vel", 3),
+    ("root_ang_vel", 3),
+    ("joint_pos", NUM_JOINTS),
+    ("joint_vel", NUM_JOINTS),
+    ("foot_pos_local", NUM_LEGS * 3),
+    ("foot_pos_world", NUM_LEGS * 3),
+)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ReferenceClip:
+    """A reference motion of the A1 as ``K + 1`` frames on the phase grid ``k / K`` (arrays are read-only).
+
+    Build one with :meth:`from_frames` (velocities, feet and the orientation table are derived there), from a gait
+    description with :func:`gaitlib.gaits.clip_from_description`, or from a motion file with
+    :func:`gaitlib.gaits.load_motion_file`; read it at any phase with :meth:`frame`.
+    """
+
+    name: str
+    """Where the clip came from: the gait name or the motion file's stem."""
+    frame_duration: float
+    """Time between consecutive frames, s."""
+    loop: bool
+    """Whether the clip repeats (phase wraps) or holds its end frames (phase clamps to [0, 1])."""
+    root_pos: np.ndarray
+    """(K+1, 3) trunk position in the world frame, m."""
+    root_quat: np.ndarray
+    """(K+1, 4) trunk orientation (w, x, y, z), consecutive frames in the same hemisphere."""
+    root_lin_vel: np.ndarray
+    """(K+1, 3) trunk linear velocity in the world frame, m/s."""
+    root_ang_vel: np.ndarray
+    """(K+1, 3) trunk angular velocity in the trunk frame, rad/s."""
+    joint_pos: np.ndarray
+    """(K+1, 12) joint angles, rad."""
+    joint_vel: np.ndarray
+    """(K+1, 12) joint velocities, rad/s."""
+    foot_pos_local: np.ndarray
+    """(K+1, 4, 3) foot contact-sphere centres in the trunk frame, m."""
+    foot_pos_world: np.ndarray
+    """(K+1, 4, 3) foot contact-sphere centres in the world frame, m."""
+    contact: np.ndarray
+    """(K+1, 4) bool: the foot is on the ground."""
+    cycle_displacement: np.ndarray
+    """(3,) world-frame trunk displacement per cycle of a looping clip, m (zero for a non-looping clip)."""
+    _tables: dict[torch.device, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = field(
+        default_factory=dict, init=False, repr=False
+    )
+
+    def __post_init__(self) -> None:
+        frames = self.root_pos.shape[0]
+        if frames < (3 if self.loop else 2) or self.frame_duration <= 0.0:
+            raise ValueError("a reference clip needs 2 frames (3 if looping) and a positive frame duration")
+        shapes = {
+            "root_pos": (frames, 3),
+            "root_quat": (frames, 4),
+            "root_lin_vel": (frames, 3),
+            "root_ang_vel": (frames, 3),
+            "joint_pos": (frames, NUM_JOINTS),
+            "joint_vel": (frames, NUM_JOINTS),
+            "foot_pos_local": (frames, NUM_LEGS, 3),
+            "foot_pos_world": (frames, NUM_LEGS, 3),
+            "contact": (frames, NUM_LEGS),
+            "cycle_displacement": (3,),
+        }
+        for name, shape in shapes.items():
+            array = np.array(getattr(self, name), dtype=bool if name == "contact" else np.float64)
+            if array.shape != shape:
+                raise ValueError(f"reference clip field {name} has shape {array.shape}, expected {shape}")
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    @classmethod
+    def from_frames(
+        cls,
+        *,
+        name: str,
+        frame_duration: float,
+        loop: bool,
+        root_pos: np.ndarray,
+        root_quat: np.ndarray,
+        joint_pos: np.ndarray,
+        contact: np.ndarray,
+        cycle_displacement: np.ndarray | None = None,
+    ) -> ReferenceClip:
+        """Build a clip from poses, deriving velocities by central finite differences and feet by kinematics.
+
+        Args:
+            name: see :attr:`name`.
+            frame_duration: time between frames, s.
+            loop: see :attr:`loop`. A looping clip's last frame must be its first pose, displaced by
+                ``cycle_displacement``; differences then wrap around the seam.
+            root_pos: (K+1, 3) trunk positions, world frame, m.
+            root_quat: (K+1, 4) trunk orientations (w, x, y, z); normalized here.
+            joint_pos: (K+1, 12) joint angles, rad.
+            contact: (K+1, 4) bool foot contacts.
+            cycle_displacement: (3,) trunk displacement per cycle, m; defaults to zero.
+        """
+        root_pos = np.asarray(root_pos, dtype=np.float64)
+        joint_pos = np.asarray(joint_pos, dtype=np.float64)
+        quat = np.asarray(root_quat, dtype=np.float64)
+        quat = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+        for k in range(1, quat.shape[0]):  # same hemisphere as the previous frame, for interpolation
+            if np.dot(quat[k], quat[k - 1]) < 0.0:
+                quat[k] = -quat[k]
+        displacement = np.zeros(3) if cycle_displacement is None else np.asarray(cycle_displacement, np.float64)
+        if not loop:
+            displacement = np.zeros(3)
+
+        prev, nxt, span = _neighbours(len(root_pos), frame_duration, loop=loop)
+        lin_vel = (root_pos[nxt] - root_pos[prev]) / span
+        if loop:  # the seam frames' outer neighbours lie one cycle displacement before and after
+            lin_vel[[0, -1]] += displacement / span[[0, -1]]
+        ang_vel = quat_to_rotation_vector(quat_multiply(quat_conjugate(quat[prev]), quat[nxt])) / span
+        joint_vel = (joint_pos[nxt] - joint_pos[prev]) / span
+        feet_local = forward_kinematics(joint_pos)
+        feet_world = root_pos[:, None, :] + quat_rotate(quat[:, None, :], feet_local)
+        return cls(
+            name=name,
+            frame_duration=float(frame_duration),
+            loop=loop,
+            root_pos=root_pos,
+            root_quat=quat,
+            root_lin_vel=lin_vel,
+            root_ang_vel=ang_vel,
+            joint_pos=joint_pos,
+            joint_vel=joint_vel,
+            foot_pos_local=feet_local,
+            foot_pos_world=feet_world,
+            contact=contact,
+            cycle_displacement=displacement,
+        )
+
+    @property
+    def num_frames(self) -> int:
+        """Number of stored frames, K + 1."""
+        return self.root_pos.shape[0]
+
+    @property
+    def period(self) -> float:
+        """Duration of the clip (one cycle of a looping clip), s."""
+        return self.frame_duration * (self.num_frames - 1)
+
+    @property
+    def phase_rate(self) -> float:
+        """Phase advance per second, cycles/s (``1 / period``)."""
+        return 1.0 / self.period
+
+    def frame(self, phase: torch.Tensor) -> ClipFrame:
+        """Interpolated reference at each of N phases, on ``phase.device``.
+
+        Args:
+            phase: (N,) phase in cycles. A looping clip wraps it (a phase of 2.25 is a quarter into the third
+                cycle, with the trunk two cycle displacements further on); a non-looping clip clamps it to [0, 1].
+
+        Returns:
+            The :class:`ClipFrame` of the N phases.
+        """
+        table, contact, displacement = self._device_tables(phase.device)
+        phase = phase.to(torch.float32)
+        if self.loop:
+            cycles = torch.floor(phase)
+            fraction = phase - cycles
+        else:
+            cycles = torch.zeros_like(phase)
+            fraction = phase.clamp(0.0, 1.0)
+        intervals = self.num_frames - 1
+        position = fraction * intervals
+        lower = position.floor().long().clamp(0, intervals - 1)
+        weight = (position - lower).unsqueeze(-1)
+        row = table[lower] * (1.0 - weight) + table[lower + 1] * weight
+        values = dict(zip((n for n, _ in _TABLE_FIELDS), row.split([w for _, w in _TABLE_FIELDS], dim=-1)))
+        shift = cycles.unsqueeze(-1) * displacement
+        count = phase.shape[0]
+        return ClipFrame(
+            root_pos=values["root_pos"] + shift,
+            root_quat=torch.nn.functional.normalize(values["root_quat"], dim=-1),
+            root_lin_vel=values["root_lin_vel"],
+            root_ang_vel=values["root_ang_vel"],
+            joint_pos=values["joint_pos"],
+            joint_vel=values["joint_vel"],
+            foot_pos_local=values["foot_pos_local"].reshape(count, NUM_LEGS, 3),
+            foot_pos_world=values["foot_pos_world"].reshape(count, NUM_LEGS, 3) + shift.unsqueeze(1),
+            contact=contact[position.round().long().clamp(0, intervals)],
+        )
+
+    def _device_tables(self, device: torch.device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The float32 frame table (K+1, 61), contact table (K+1, 4) and displacement (3,) on ``device``."""
+        if device not in self._tables:
+            rows = np.concatenate([getattr(self, n).reshape(self.num_frames, w) for n, w in _TABLE_FIELDS], axis=1)
+            self._tables[device] = (
+                torch.tensor(rows, dtype=torch.float32, device=device),
+                torch.tensor(self.contact, device=device),
+                torch.tensor(self.cycle_displacement, dtype=torch.float32, device=device),
+            )
+        return self._tables[device]
+
+
+def _neighbours(frames: int, frame_duration: float, *, loop: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indices of the previous and next frames for central differences and the time between them, s.
+
+    A looping clip's first and last frames are the same pose, so their outer neighbours are the second and the
+    second-to-last frames; a non-looping clip uses one-sided differences at its ends.
+    """
+    index = np.arange(frames)
+    last = frames - 1
+    if loop:
+        prev = np.where(index == 0, last - 1, index - 1)
+        nxt = np.where(index == last, 1, index + 1)
+        span = np.full(frames, 2.0 * frame_duration)
+    else:
+        prev = np.maximum(index - 1, 0)
+        nxt = np.minimum(index + 1, last)
+        span = (nxt - prev) * frame_duration
+    return prev, nxt, span[:, None]

@@ -1,0 +1,136 @@
+"""Gait descriptions: a gait as a handful of numbers, and the TOML file format that holds one.
+
+A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :class:`GaitDescription` field and a
+``[phase_offsets]`` table with one entry per leg::
+
+    name = "trot"             # optional; defaults to the file name without ".toml"
+    duty_factor = 0.6         # fraction of the cycle each foot is on the ground
+    stride_frequency = 2.0    # Hz
+    forward_speed = 0.5       # m/s
+    swing_height = 0.06       # m
+    body_height = 0.26        # m
+    foot_lateral_offset = 0.0 # m, optional
+
+    [phase_offsets]           # touchdown phase of each leg, cycles
+    FR = 0.0
+    FL = 0.5
+    RR = 0.5
+    RL = 0.0
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from gaitlib.errors import GaitError
+from gaitlib.robots.a1.constants import FOOT_RADIUS, LEG_NAMES
+
+__all__ = ["GaitDescription", "load_gait_file"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class GaitDescription:
+    """A periodic gait of the A1, from which :func:`gaitlib.gaits.clip_from_description` builds a reference clip.
+
+    Each foot is in stance for ``duty_factor`` of the cycle starting at its phase offset, then swings. The trunk
+    moves forward at constant speed and height with level orientation.
+    """
+
+    name: str
+    """Registry name, e.g. ``"trot"``."""
+    phase_offsets: tuple[float, float, float, float]
+    """Touchdown phase of each leg in leg order FR, FL, RR, RL, cycles in [0, 1): the foot lands at that phase
+    and stays on the ground for ``duty_factor`` of a cycle."""
+    duty_factor: float
+    """Fraction of the cycle each foot spends on the ground, in (0, 1]; 1 means the feet never lift."""
+    stride_frequency: float
+    """Gait cycles per second, Hz (the period is its inverse; a standing gait still has one, so phase is defined)."""
+    forward_speed: float
+    """Trunk speed along its x axis, m/s (the stride length is ``forward_speed / stride_frequency``)."""
+    swing_height: float
+    """Highest lift of a swinging foot above the ground, m."""
+    body_height: float
+    """Trunk-frame origin height above the ground, m (feet on the ground have their sphere centres one foot
+    radius up)."""
+    foot_lateral_offset: float = 0.0
+    """Sideways shift of each foot from below its thigh joint, m, positive away from the body midline (widens the
+    stance)."""
+
+    def __post_init__(self) -> None:
+        def fail(problem: str) -> GaitError:
+            return GaitError(f"gait '{self.name}': {problem}")
+
+        if not isinstance(self.name, str) or not self.name:
+            raise GaitError(f"gait name must be a non-empty string, got {self.name!r}")
+        for field in ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height",
+                      "foot_lateral_offset"):
+            value = getattr(self, field)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise fail(f"{field} must be a finite number, got {value!r}")
+            object.__setattr__(self, field, float(value))
+        offsets = tuple(self.phase_offsets)
+        if len(offsets) != len(LEG_NAMES):
+            raise fail(f"phase_offsets needs {len(LEG_NAMES)} values ({', '.join(LEG_NAMES)}), got {len(offsets)}")
+        for leg, offset in zip(LEG_NAMES, offsets):
+            if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0.0 <= offset < 1.0:
+                raise fail(f"phase offset of {leg} must be a number in [0, 1) cycles, got {offset!r}")
+        object.__setattr__(self, "phase_offsets", tuple(float(o) for o in offsets))
+        if not 0.0 < self.duty_factor <= 1.0:
+            raise fail(f"duty_factor must be in (0, 1], got {self.duty_factor}")
+        if self.stride_frequency <= 0.0:
+            raise fail(f"stride_frequency must be positive (Hz), got {self.stride_frequency}")
+        if self.duty_factor == 1.0 and self.forward_speed != 0.0:
+            raise fail("a gait whose feet never lift (duty_factor 1) cannot move (forward_speed must be 0)")
+        if self.swing_height < 0.0:
+            raise fail(f"swing_height must be >= 0 m, got {self.swing_height}")
+        if self.body_height <= FOOT_RADIUS:
+            raise fail(f"body_height must exceed the foot radius {FOOT_RADIUS} m, got {self.body_height}")
+
+    @property
+    def period(self) -> float:
+        """Duration of one gait cycle, s."""
+        return 1.0 / self.stride_frequency
+
+    @property
+    def stride_length(self) -> float:
+        """Distance the trunk travels per cycle, m."""
+        return self.forward_speed / self.stride_frequency
+
+
+_SCALAR_KEYS = ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height")
+_OPTIONAL_KEYS = ("name", "foot_lateral_offset")
+
+
+def load_gait_file(path: str | Path) -> GaitDescription:
+    """Read a gait description from a TOML file (format in this module's docstring).
+
+    Raises:
+        GaitError: the file is unreadable, not TOML, lacks or misspells a key, or describes an impossible gait;
+            the message names the file and the problem on one line.
+    """
+    path = Path(path)
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+        raise GaitError(f"{path}: cannot read gait file: {error}") from error
+    unknown = sorted(set(table) - set(_SCALAR_KEYS) - set(_OPTIONAL_KEYS) - {"phase_offsets"})
+    if unknown:
+        raise GaitError(f"{path}: unknown key(s) {', '.join(unknown)}")
+    missing = [key for key in (*_SCALAR_KEYS, "phase_offsets") if key not in table]
+    if missing:
+        raise GaitError(f"{path}: missing key(s) {', '.join(missing)}")
+    offsets = table["phase_offsets"]
+    if not isinstance(offsets, dict) or set(offsets) != set(LEG_NAMES):
+        raise GaitError(f"{path}: [phase_offsets] must give exactly the legs {', '.join(LEG_NAMES)}")
+    try:
+        return GaitDescription(
+            name=table.get("name", path.stem),
+            phase_offsets=tuple(offsets[leg] for leg in LEG_NAMES),
+            foot_lateral_offset=table.get("foot_lateral_offset", 0.0),
+            **{key: table[key] for key in _SCALAR_KEYS},
+        )
+    except GaitError as error:
+        raise GaitError(f"{path}: {error}") from error

@@ -1,0 +1,43 @@
+"""Registry of gait descriptions: the shipped ones (``descriptions/*.toml``, one file per gait) and the user's own.
+
+Adding a gait to gaitlib means adding one TOML file to ``gaitlib/gaits/descriptions/``; a user's gait file is
+read with :func:`gaitlib.gaits.load_gait_file` and added with :func:`register_gait`.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+from gaitlib.errors import UnknownNameError
+from gaitlib.gaits.description import GaitDescription, load_gait_file
+
+__all__ = ["gait_names", "get_gait", "register_gait"]
+
+_GAITS: dict[str, GaitDescription] = {}
+
+
+def register_gait(desc: GaitDescription) -> None:
+    """Add ``desc`` to the registry under ``desc.name`` (replacing any gait of that name)."""
+    _GAITS[desc.name] = desc
+
+
+def get_gait(name: str) -> GaitDescription:
+    """Return the registered gait called ``name``; raises :class:`UnknownNameError` for an unknown name."""
+    if name not in _GAITS:
+        raise UnknownNameError("gait", name, list(_GAITS))
+    return _GAITS[name]
+
+
+def gait_names() -> list[str]:
+    """Names of the registered gaits, sorted."""
+    return sorted(_GAITS)
+
+
+def _register_shipped() -> None:
+    for entry in resources.files("gaitlib.gaits").joinpath("descriptions").iterdir():
+        if entry.name.endswith(".toml"):
+            with resources.as_file(entry) as path:
+                register_gait(load_gait_file(path))
+
+
+_register_shipped()

@@ -1,0 +1,117 @@
+"""From a gait description to a reference clip: foot trajectories planned in the trunk frame, then leg IK.
+
+The trunk moves at ``forward_speed`` along x at ``body_height`` with level orientation. Each foot has a neutral
+point below its thigh joint (hip x, hip y plus thigh offset, shifted outward by ``foot_lateral_offset``) on the
+ground. Leg phase ``psi = (phase - phase_offset) mod 1``:
+
+* stance, ``psi < duty_factor``: the foot stays still in the world, so in the trunk frame it slides backward at
+  the forward speed, from ``+d/2`` to ``-d/2`` about the neutral point, where ``d = duty_factor * stride_length``;
+* swing: with swing progress ``s`` in [0, 1), the foot moves forward one stride length in the world along a
+  cycloid, ``stride_length * (s - sin(2 pi s) / (2 pi))`` (zero velocity at lift-off and touchdown), and lifts by
+  ``swing_height * (1 - cos(2 pi s)) / 2`` (apex at mid-swing, zero vertical velocity at both ends).
+
+Foot positions are contact-sphere centres; a foot on the ground has its centre one foot radius above it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gaitlib.errors import GaitError
+from gaitlib.gaits.clip import ReferenceClip
+from gaitlib.gaits.description import GaitDescription
+from gaitlib.gaits.kinematics import forward_kinematics, inverse_kinematics
+from gaitlib.robots.a1.constants import FOOT_RADIUS, HIP_OFFSETS, JOINT_LOWER, JOINT_UPPER, THIGH_OFFSET_Y
+
+__all__ = ["clip_from_description", "contact_schedule", "foot_trajectory"]
+
+_REACH_TOLERANCE = 1e-6  # m: IK solutions whose feet miss their targets by more than this are out of reach
+
+
+def _leg_phase(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """(..., 4) position of each leg in its own cycle, starting at touchdown, cycles in [0, 1)."""
+    return np.mod(np.asarray(phase, dtype=np.float64)[..., None] - np.asarray(desc.phase_offsets), 1.0)
+
+
+def contact_schedule(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """Planned foot contacts.
+
+    Args:
+        desc: the gait.
+        phase: (...) gait phase, cycles.
+
+    Returns:
+        (..., 4) bool, leg order FR, FL, RR, RL: the foot is in stance.
+    """
+    return _leg_phase(desc, phase) < desc.duty_factor
+
+
+def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """Planned foot positions in the trunk frame (see the module docstring for the trajectories).
+
+    Args:
+        desc: the gait.
+        phase: (...) gait phase, cycles.
+
+    Returns:
+        (..., 4, 3) foot contact-sphere centres, leg order FR, FL, RR, RL, trunk frame, m.
+    """
+    psi = _leg_phase(desc, phase)
+    duty = desc.duty_factor
+    stride = desc.stride_length
+    stance_travel = duty * stride
+    in_stance = psi < duty
+    stance_x = stance_travel * (0.5 - psi / duty)
+    swing_fraction = 1.0 - duty
+    s = np.clip((psi - duty) / swing_fraction, 0.0, 1.0) if swing_fraction > 0.0 else np.zeros_like(psi)
+    angle = 2.0 * np.pi * s
+    # World-frame cycloid minus the trunk's own advance during the swing, from the back of the stance stroke.
+    swing_x = -0.5 * stance_travel + stride * (s - np.sin(angle) / (2.0 * np.pi)) - swing_fraction * stride * s
+    lift = desc.swing_height * 0.5 * (1.0 - np.cos(angle))
+
+    thigh_y = np.asarray(THIGH_OFFSET_Y)
+    neutral = np.asarray(HIP_OFFSETS) + np.stack(
+        [np.zeros(4), thigh_y + np.sign(thigh_y) * desc.foot_lateral_offset, np.zeros(4)], axis=-1
+    )
+    x = neutral[:, 0] + np.where(in_stance, stance_x, swing_x)
+    y = np.broadcast_to(neutral[:, 1], x.shape)
+    z = FOOT_RADIUS - desc.body_height + np.where(in_stance, 0.0, lift)
+    return np.stack([x, y, z], axis=-1)
+
+
+def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -> ReferenceClip:
+    """One looping cycle of ``desc`` as a reference clip, through the A1's leg inverse kinematics.
+
+    The cycle is stored at about ``frame_rate`` frames per second (rounded to a whole number of frames per
+    cycle, at least 16); the trunk starts at x = 0 and advances one stride length per cycle.
+
+    Raises:
+        GaitError: a foot target is out of the leg's reach or needs a joint beyond its limits (e.g. the body
+            height or stride is too large).
+    """
+    intervals = max(16, round(desc.period * frame_rate))
+    phase = np.arange(intervals + 1) / intervals
+    feet = foot_trajectory(desc, phase)
+    feet[-1] = feet[0]  # the last frame closes the loop exactly
+    joint_pos = inverse_kinematics(feet)
+    miss = np.abs(forward_kinematics(joint_pos) - feet).max()
+    if miss > _REACH_TOLERANCE:
+        raise GaitError(f"gait '{desc.name}': a foot target is {miss:.3f} m out of the A1's reach")
+    outside = (joint_pos < np.asarray(JOINT_LOWER)) | (joint_pos > np.asarray(JOINT_UPPER))
+    if outside.any():
+        raise GaitError(f"gait '{desc.name}': the foot trajectories need joint angles beyond the A1's limits")
+    root_pos = np.zeros((intervals + 1, 3))
+    root_pos[:, 0] = desc.stride_length * phase
+    root_pos[:, 2] = desc.body_height
+    root_quat = np.zeros((intervals + 1, 4))
+    root_quat[:, 0] = 1.0
+    return ReferenceClip.from_frames(
+        name=desc.name,
+        frame_duration=desc.period / intervals,
+        loop=True,
+        root_pos=root_pos,
+        root_quat=root_quat,
+        joint_pos=joint_pos,
+        contact=contact_schedule(desc, phase),
+        cycle_displacement=np.array([desc.stride_length, 0.0, 0.0]),
+    )

@@ -1,0 +1,367 @@
+"""Tests of gaitlib.gaits: A1 leg kinematics, gait descriptions and their registry, reference clips, motion files."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+from gaitlib.errors import GaitError, UnknownNameError
+from gaitlib.gaits import (
+    clip_from_description,
+    contact_schedule,
+    forward_kinematics,
+    foot_trajectory,
+    gait_names,
+    get_gait,
+    inverse_kinematics,
+    leg_forward_kinematics,
+    leg_inverse_kinematics,
+    load_gait_file,
+    load_motion_file,
+    register_gait,
+    save_motion_file,
+)
+from gaitlib.gaits import registry
+from gaitlib.robots.a1 import constants as c
+
+FR, FL, RR, RL = range(4)
+SHIPPED = ("bound", "pace", "pronk", "stand", "trot", "walk")
+
+
+def _phases(start: float, stop: float, count: int) -> torch.Tensor:
+    return torch.linspace(start, stop, count, dtype=torch.float64)
+
+
+# --- kinematics -------------------------------------------------------------------------------------------------
+
+
+def test_forward_kinematics_hand_computed() -> None:
+    straight = forward_kinematics(np.zeros(12))
+    # Leg hanging straight down: hip offset, thigh offset sideways, two 0.2 m links down.
+    np.testing.assert_allclose(straight[FR], [0.183, -0.047 - 0.08505, -0.4], atol=1e-12)
+    np.testing.assert_allclose(straight[RL], [-0.183, 0.047 + 0.08505, -0.4], atol=1e-12)
+    # Default pose (0, 0.9, -1.8): the foot is straight below the thigh joint, 2 * 0.2 * cos(0.9) down.
+    default = forward_kinematics(np.array(c.DEFAULT_JOINT_POS))
+    np.testing.assert_allclose(default[:, 0], [0.183, 0.183, -0.183, -0.183], atol=1e-12)
+    np.testing.assert_allclose(default[:, 2], -0.4 * math.cos(0.9), atol=1e-12)
+    assert -default[0, 2] + c.FOOT_RADIUS == pytest.approx(c.STANDING_HEIGHT, abs=1e-4)
+    # Abduction by +90 degrees swings the right leg's foot from below the hip to the side, up to the hip's height.
+    abducted = leg_forward_kinematics(np.array([math.pi / 2, 0.0, 0.0]), leg="FR")
+    np.testing.assert_allclose(abducted, [0.183, -0.047 + 0.4, -0.08505], atol=1e-12)
+
+
+def test_forward_kinematics_matches_mujoco() -> None:
+    model = mujoco.MjModel.from_xml_path(str(c.MJCF_PATH))
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(0)
+    joint_pos = rng.uniform(c.JOINT_LOWER, c.JOINT_UPPER, size=(20, 12))
+    ours = forward_kinematics(joint_pos)
+    for sample, angles in enumerate(joint_pos):
+        data.qpos[:] = 0.0
+        data.qpos[3] = 1.0  # trunk at the origin with identity orientation: trunk frame = world frame
+        for name, angle in zip(c.JOINT_NAMES, angles):
+            data.qpos[model.jnt_qposadr[model.joint(name).id]] = angle
+        mujoco.mj_kinematics(model, data)
+        for leg, foot in enumerate(c.FOOT_NAMES):
+            np.testing.assert_allclose(ours[sample, leg], data.site(foot).xpos, atol=1e-6)
+            one_leg = leg_forward_kinematics(angles[3 * leg : 3 * leg + 3], leg=c.LEG_NAMES[leg])
+            np.testing.assert_allclose(one_leg, ours[sample, leg], atol=1e-12)
+
+
+def test_inverse_kinematics_round_trip() -> None:
+    rng = np.random.default_rng(1)
+    angles = np.stack(
+        [
+            rng.uniform(*c.ABDUCTION_LIMITS, size=(500, 4)),
+            rng.uniform(-1.0, 2.5, size=(500, 4)),
+            rng.uniform(*c.CALF_LIMITS, size=(500, 4)),
+        ],
+        axis=-1,
+    )
+    # The IK serves feet below the hip (every standing and walking pose); keep those samples.
+    below = (np.cos(angles[..., 1]) + np.cos(angles[..., 1] + angles[..., 2]) > 1e-3).all(axis=-1)
+    joint_pos = angles[below].reshape(-1, 12)
+    assert len(joint_pos) > 100
+    np.testing.assert_allclose(inverse_kinematics(forward_kinematics(joint_pos)), joint_pos, atol=1e-9)
+    one_leg = leg_inverse_kinematics(forward_kinematics(joint_pos)[:, RL], leg="RL")
+    np.testing.assert_allclose(one_leg, joint_pos[:, 9:12], atol=1e-9)
+    with pytest.raises(UnknownNameError):
+        leg_inverse_kinematics(np.zeros(3), leg="XX")
+
+
+# --- descriptions and registry ----------------------------------------------------------------------------------
+
+
+def test_registry_ships_gaits_and_rejects_unknown_names() -> None:
+    assert set(SHIPPED) <= set(gait_names())
+    trot = get_gait("trot")
+    assert trot.stride_length == pytest.approx(trot.forward_speed / trot.stride_frequency)
+    assert trot.period == pytest.approx(1.0 / trot.stride_frequency)
+    with pytest.raises(UnknownNameError, match="unknown gait 'moonwalk'.*trot"):
+        get_gait("moonwalk")
+
+
+def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
+    monkeypatch.setattr(registry, "_GAITS", dict(registry._GAITS))
+    path = tmp_path / "amble.toml"
+    path.write_text(
+        "duty_factor = 0.7\nstride_frequency = 1.5\nforward_speed = 0.3\nswing_height = 0.05\n"
+        "body_height = 0.25\nfoot_lateral_offset = 0.02\n"
+        "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.25\nRL = 0.75\n"
+    )
+    desc = load_gait_file(path)
+    assert desc.name == "amble"  # from the file name
+    register_gait(desc)
+    assert "amble" in gait_names() and get_gait("amble") is desc
+    clip = clip_from_description(get_gait("amble"))
+    assert clip.period == pytest.approx(1.0 / 1.5)
+    frame = clip.frame(torch.tensor([0.0, 0.8]))
+    # Leg phases (phase - offset) mod 1 against duty 0.7: at phase 0 only RR (0.75) swings, at 0.8 only FR (0.8).
+    assert frame.contact.tolist() == [[True, True, False, True], [False, True, True, True]]
+    # Feet sit 2 cm outward of their thigh joints.
+    np.testing.assert_allclose(frame.foot_pos_local[0, :, 1].numpy(), [-0.15205, 0.15205, -0.15205, 0.15205], atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("duty_factor = = 0.5", "cannot read gait file"),
+        ("duty_factor = 0.5\n", "missing key"),
+        (
+            "duty_factr = 0.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n",
+            "unknown key",
+        ),
+        (
+            "duty_factor = 1.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n"
+            "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.5\nRL = 0.0\n",
+            "duty_factor must be in",
+        ),
+        (
+            "duty_factor = 0.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n"
+            "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.5\n",
+            "phase_offsets",
+        ),
+        (
+            "duty_factor = 0.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n"
+            "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 1.5\nRL = 0.0\n",
+            "phase offset of RR",
+        ),
+    ],
+)
+def test_malformed_gait_file_gives_a_one_line_error(tmp_path, text: str, problem: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(GaitError, match=problem) as caught:
+        load_gait_file(path)
+    assert "bad.toml" in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_impossible_gaits_are_rejected() -> None:
+    trot = get_gait("trot")
+    with pytest.raises(GaitError, match="cannot move"):
+        dataclasses.replace(trot, duty_factor=1.0)
+    too_tall = dataclasses.replace(trot, name="tall", body_height=0.45)
+    with pytest.raises(GaitError, match="out of the A1's reach"):
+        clip_from_description(too_tall)
+
+
+# --- reference clips from descriptions --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_clip_is_periodic_and_inside_joint_limits(name: str) -> None:
+    desc = get_gait(name)
+    clip = clip_from_description(desc)
+    assert clip.period == pytest.approx(desc.period)
+    assert clip.phase_rate == pytest.approx(desc.stride_frequency)
+    assert (clip.joint_pos >= np.array(c.JOINT_LOWER)).all() and (clip.joint_pos <= np.array(c.JOINT_UPPER)).all()
+    start, end = clip.frame(torch.tensor([0.0])), clip.frame(torch.tensor([1.0]))
+    torch.testing.assert_close(end.joint_pos[0], start.joint_pos[0])
+    torch.testing.assert_close(end.joint_vel[0], start.joint_vel[0])
+    # The trunk advances one stride per cycle.
+    torch.testing.assert_close(
+        end.root_pos[0] - start.root_pos[0], torch.tensor([desc.stride_length, 0.0, 0.0]), atol=1e-6, rtol=0
+    )
+    # Seamless across the wrap: successive samples over two cycles move no more than the joint velocities allow.
+    phase = _phases(0.0, 2.0, 4001)
+    frames = clip.frame(phase)
+    step = (phase[1] - phase[0]).item() * desc.period
+    jumps = (frames.joint_pos[1:] - frames.joint_pos[:-1]).abs()
+    assert (jumps <= step * frames.joint_vel.abs().max() * 1.05 + 1e-5).all()
+    # Interpolated joint velocities are the derivative of the interpolated joint angles.
+    derivative = (frames.joint_pos[2:] - frames.joint_pos[:-2]) / (2 * step)
+    assert (derivative - frames.joint_vel[1:-1]).abs().max() < 0.05 * max(1.0, frames.joint_vel.abs().max().item())
+
+
+@pytest.mark.parametrize("name", ["trot", "pace", "bound", "walk"])
+def test_clip_feet_follow_the_described_trajectories(name: str) -> None:
+    desc = get_gait(name)
+    clip = clip_from_description(desc)
+    phase = _phases(0.0, 1.0, 997)[:-1]
+    frames = clip.frame(phase)
+    feet = forward_kinematics(frames.joint_pos.double().numpy())
+    np.testing.assert_allclose(feet, foot_trajectory(desc, phase.numpy()), atol=1e-4)
+    np.testing.assert_allclose(frames.foot_pos_local.numpy(), feet, atol=1e-4)
+    grid = np.arange(clip.num_frames) / (clip.num_frames - 1)
+    np.testing.assert_array_equal(clip.contact, contact_schedule(desc, grid))
+    for leg in range(4):
+        offset = desc.phase_offsets[leg]
+        # Stance: the foot stays put in the world, on the ground.
+        stance = clip.frame(_phases(offset + 0.01, offset + desc.duty_factor - 0.01, 200))
+        world = stance.root_pos[:, None, :] + torch.from_numpy(
+            forward_kinematics(stance.joint_pos.double().numpy())
+        ).float()
+        spread = world[:, leg].max(dim=0).values - world[:, leg].min(dim=0).values
+        assert spread.max() < 1e-4, (leg, spread)
+        assert world[:, leg, 2].sub(c.FOOT_RADIUS).abs().max() < 1e-3
+        assert stance.contact[:, leg].all()
+        # Swing: the foot lifts to the swing height at mid-swing and lands one stride further on.
+        lift_off = offset + desc.duty_factor
+        swing = clip.frame(_phases(lift_off, offset + 1.0, 201))
+        swing_world = swing.foot_pos_world[:, leg]
+        assert swing_world[:, 2].max() - c.FOOT_RADIUS == pytest.approx(desc.swing_height, abs=1e-3)
+        assert swing_world[100, 2] - c.FOOT_RADIUS == pytest.approx(desc.swing_height, abs=1e-3)
+        assert swing_world[-1, 0] - swing_world[0, 0] == pytest.approx(desc.stride_length, abs=1e-3)
+        assert not swing.contact[3:-3, leg].any()
+
+
+def test_trot_foot_positions_hand_computed() -> None:
+    # Trot: duty 0.6, stride 0.25 m, body 0.26 m. At phase 0 FR touches down at the front of its stance stroke:
+    # x = hip x + 0.6 * 0.25 / 2, z = foot radius - body height.
+    trot = get_gait("trot")
+    frame = clip_from_description(trot).frame(torch.tensor([0.0]))
+    expected_x = 0.183 + trot.duty_factor * trot.stride_length / 2
+    np.testing.assert_allclose(
+        frame.foot_pos_local[0, FR].numpy(), [expected_x, -0.13205, c.FOOT_RADIUS - trot.body_height], atol=1e-5
+    )
+    assert frame.root_height.item() == pytest.approx(trot.body_height)
+    torch.testing.assert_close(frame.root_lin_vel[0], torch.tensor([trot.forward_speed, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize(
+    ("name", "together", "apart"),
+    [
+        ("trot", [(FR, RL), (FL, RR)], [(FR, FL), (FR, RR), (FL, RL), (RR, RL)]),
+        ("pace", [(FR, RR), (FL, RL)], [(FR, FL), (FR, RL), (FL, RR), (RR, RL)]),
+    ],
+)
+def test_leg_pairs_move_together(name: str, together, apart) -> None:
+    clip = clip_from_description(get_gait(name))
+    contact = clip.frame(_phases(0.0, 1.0, 1001)).contact
+    for a, b in together:
+        assert torch.equal(contact[:, a], contact[:, b]), (a, b)
+    for a, b in apart:
+        # Never both in the air; one lands as the other lifts (half a cycle apart).
+        assert not (~contact[:, a] & ~contact[:, b]).any(), (a, b)
+        assert (contact[:, a] != contact[:, b]).float().mean() > 0.5
+    # The second pair repeats the first half a cycle later (up to one frame of rounding at the switches).
+    shifted = clip.frame(_phases(0.5, 1.5, 1001)).contact
+    assert (shifted[:, together[1][0]] != contact[:, together[0][0]]).float().mean() < 0.01
+
+
+def test_stand_has_all_feet_down_and_no_motion() -> None:
+    stand = get_gait("stand")
+    frames = clip_from_description(stand).frame(_phases(-1.0, 3.0, 401))
+    assert frames.contact.all()
+    assert frames.joint_vel.abs().max() == 0.0
+    assert frames.root_lin_vel.abs().max() == 0.0 and frames.root_ang_vel.abs().max() == 0.0
+    assert (frames.joint_pos - frames.joint_pos[0]).abs().max() == 0.0
+    torch.testing.assert_close(frames.root_height, torch.full((401,), stand.body_height))
+    torch.testing.assert_close(frames.root_pos[:, :2], torch.zeros(401, 2))
+
+
+def test_clip_frame_shapes() -> None:
+    clip = clip_from_description(get_gait("pace"))
+    frame = clip.frame(torch.rand(7))
+    shapes = {
+        "root_pos": (7, 3),
+        "root_quat": (7, 4),
+        "root_lin_vel": (7, 3),
+        "root_ang_vel": (7, 3),
+        "joint_pos": (7, 12),
+        "joint_vel": (7, 12),
+        "foot_pos_local": (7, 4, 3),
+        "foot_pos_world": (7, 4, 3),
+        "contact": (7, 4),
+        "root_height": (7,),
+    }
+    for name, shape in shapes.items():
+        assert tuple(getattr(frame, name).shape) == shape, name
+    assert frame.contact.dtype == torch.bool and frame.joint_pos.dtype == torch.float32
+    torch.testing.assert_close(frame.root_quat, torch.tensor([[1.0, 0.0, 0.0, 0.0]]).expand(7, 4))
+
+
+# --- motion_imitation files -------------------------------------------------------------------------------------
+
+
+def test_motion_file_round_trip(tmp_path) -> None:
+    original = clip_from_description(get_gait("pace"), frame_rate=120.0)
+    path = tmp_path / "pace_clip.txt"
+    save_motion_file(original, path)
+    loaded = load_motion_file(path)
+    assert loaded.name == "pace_clip" and loaded.loop
+    assert loaded.period == pytest.approx(original.period)
+    for field in ("root_pos", "root_quat", "root_lin_vel", "root_ang_vel", "joint_pos", "joint_vel",
+                  "foot_pos_local", "foot_pos_world", "cycle_displacement"):
+        np.testing.assert_allclose(getattr(loaded, field), getattr(original, field), atol=1e-9, err_msg=field)
+    # Contacts are estimated from foot heights: every planned stance frame is found, no high foot is called down.
+    assert loaded.contact[original.contact].all()
+    high = original.foot_pos_world[..., 2] > c.FOOT_RADIUS + 0.011
+    assert not loaded.contact[high].any()
+
+
+def test_motion_file_hand_computed(tmp_path) -> None:
+    # Three frames 0.1 s apart: the trunk yaws at 1 rad/s and the FR thigh opens at 2 rad/s; "Clamp" plays once.
+    frames = []
+    for k in range(3):
+        yaw = 0.1 * k
+        joints = list(c.DEFAULT_JOINT_POS)
+        joints[1] += 0.2 * k
+        frames.append([0.05 * k, 0.0, 0.27, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2), *joints])
+    path = tmp_path / "turn.txt"
+    path.write_text(json.dumps({"LoopMode": "Clamp", "FrameDuration": 0.1, "Frames": frames}))
+    clip = load_motion_file(path)
+    assert not clip.loop and clip.period == pytest.approx(0.2)
+    np.testing.assert_allclose(clip.root_quat[2], [math.cos(0.1), 0.0, 0.0, math.sin(0.1)], atol=1e-12)
+    np.testing.assert_allclose(clip.root_ang_vel, [[0.0, 0.0, 1.0]] * 3, atol=1e-9)
+    np.testing.assert_allclose(clip.root_lin_vel, [[0.5, 0.0, 0.0]] * 3, atol=1e-9)
+    np.testing.assert_allclose(clip.joint_vel[:, 1], 2.0, atol=1e-9)
+    # Past the end the clip holds its last frame.
+    late = clip.frame(torch.tensor([1.7]))
+    np.testing.assert_allclose(late.joint_pos[0].numpy(), clip.joint_pos[2], atol=1e-6)
+    np.testing.assert_allclose(late.root_pos[0].numpy(), [0.1, 0.0, 0.27], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        ("{not json", "cannot read motion file"),
+        ("[1, 2, 3]", "JSON object"),
+        ('{"LoopMode": "Wrap", "FrameDuration": 0.01}', "missing key"),
+        ('{"LoopMode": "Bounce", "FrameDuration": 0.01, "Frames": []}', "LoopMode"),
+        ('{"LoopMode": "Wrap", "FrameDuration": 0, "Frames": []}', "FrameDuration"),
+        ('{"LoopMode": "Wrap", "FrameDuration": 0.01, "Frames": [[0, 0, 0.27]]}', "at least 3 frames"),
+        ('{"LoopMode": "Clamp", "FrameDuration": 0.01, "Frames": [FRAME, FRAME_SHORT]}', "frame 1 must be 19"),
+        ('{"LoopMode": "Clamp", "FrameDuration": 0.01, "Frames": [FRAME, FRAME_TEXT]}', "frame 1 must be 19"),
+        ('{"LoopMode": "Clamp", "FrameDuration": 0.01, "Frames": [FRAME, FRAME_ZERO_QUAT]}', "zero root quaternion"),
+    ],
+)
+def test_malformed_motion_file_gives_a_one_line_error(tmp_path, content: str, problem: str) -> None:
+    frame = [0.0, 0.0, 0.27, 0.0, 0.0, 0.0, 1.0, *c.DEFAULT_JOINT_POS]
+    content = (
+        content.replace("FRAME_SHORT", json.dumps(frame[:-1]))
+        .replace("FRAME_TEXT", json.dumps([*frame[:-1], "x"]))
+        .replace("FRAME_ZERO_QUAT", json.dumps([*frame[:3], 0, 0, 0, 0, *frame[7:]]))
+        .replace("FRAME", json.dumps(frame))
+    )
+    path = tmp_path / "broken.txt"
+    path.write_text(content)
+    with pytest.raises(GaitError, match=problem) as caught:
+        load_motion_file(path)
+    assert "broken.txt" in str(caught.value) and "\n" not in str(caught.value)
