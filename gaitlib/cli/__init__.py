@@ -6,7 +6,7 @@ import sys
 
 import typer
 
-from gaitlib.cli import bench
+from gaitlib.cli import bench, train
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -18,6 +18,8 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+app.command("train")(train.train_command)
+app.command("eval")(train.eval_command)
 app.add_typer(bench.app, name="bench")
 
 

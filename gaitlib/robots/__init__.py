@@ -31,6 +31,10 @@ class RobotSpec:
     """Name of the free-floating base body that pushes are applied to."""
     default_joint_pos: tuple[float, ...]
     """Standing pose, rad, in joint order."""
+    joint_lower: tuple[float, ...]
+    """Lower joint limits, rad, in joint order."""
+    joint_upper: tuple[float, ...]
+    """Upper joint limits, rad, in joint order."""
     standing_height: float
     """Trunk height above the ground in the standing pose, m."""
     torque_limit: float
@@ -84,6 +88,8 @@ def _register_a1() -> None:
             foot_names=c.FOOT_NAMES,
             trunk_body=c.TRUNK_BODY,
             default_joint_pos=c.DEFAULT_JOINT_POS,
+            joint_lower=c.JOINT_LOWER,
+            joint_upper=c.JOINT_UPPER,
             standing_height=c.STANDING_HEIGHT,
             torque_limit=c.TORQUE_LIMIT,
             kp_default=c.KP_DEFAULT,

@@ -88,6 +88,9 @@ class MujocoBackend(SimBackend):
         bounds = np.linspace(0, num_worlds, n_threads + 1).astype(int)
         self._chunks = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
         self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="gaitlib-mujoco")
+        # torch's intra-op threads busy-wait between the many small tensor ops around each step and starve the
+        # MuJoCo threads (measured: 10-25x slower small ops and updates on 2 cores); one torch thread it is.
+        torch.set_num_threads(1)
 
         all_worlds = torch.arange(num_worlds)
         self.set_pd_gains(

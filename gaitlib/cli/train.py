@@ -1,0 +1,131 @@
+"""``gaitlib train GAIT`` and ``gaitlib eval GAIT``."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import typer
+
+__all__ = ["eval_command", "train_command"]
+
+
+def _description(gait: str, gait_file: Path | None):
+    from gaitlib.gaits import get_gait, load_gait_file
+
+    if gait_file is not None:
+        description = load_gait_file(gait_file)
+        if description.name != gait:
+            from gaitlib.errors import GaitError
+
+            raise GaitError(f"{gait_file} describes gait '{description.name}', not '{gait}'")
+        return description
+    return get_gait(gait)
+
+
+def train_command(
+    gait: str = typer.Argument(..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."),
+    preset: str = typer.Option("cpu", "--preset", help="cpu (tuned for a 2-core CPU) or paper (Table 2)."),
+    iterations: int | None = typer.Option(None, "--iterations", help="PPO iterations (default: the preset's)."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    gait_file: Path | None = typer.Option(None, "--gait-file", help="TOML gait description of a new gait."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
+    checkpoint_every: int = typer.Option(50, "--checkpoint-every", help="Iterations between checkpoints."),
+    eval_episodes: int = typer.Option(64, "--eval-episodes", help="Episodes of the final evaluation."),
+) -> None:
+    """Train one gait policy with PPO and write it to the library (other gaits are never touched)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from gaitlib.training import default_library_dir, get_preset
+    from gaitlib.training.trainer import TrainRequest, train_gait
+
+    description = _description(gait, gait_file)
+    chosen = get_preset(preset)
+    request = TrainRequest(
+        description=description,
+        preset=chosen,
+        iterations=iterations if iterations is not None else chosen.iterations,
+        library=library or default_library_dir(),
+        run_dir=run_dir or Path("runs") / gait,
+        backend=backend,
+        seed=seed,
+        resume=resume,
+        checkpoint_every=checkpoint_every,
+        eval_episodes=eval_episodes,
+    )
+    console = Console(stderr=True)
+    columns = (
+        TextColumn("[bold]train {task.fields[gait]}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[status]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=console) as progress:
+        task = progress.add_task("train", total=request.iterations, gait=gait, status="starting")
+
+        def show(stats) -> None:
+            terms = " ".join(f"{k[:4]} {v:.2f}" for k, v in stats.reward_terms.items())
+            length = "" if math.isnan(stats.mean_episode_length) else f" ep {stats.mean_episode_length:4.1f}s"
+            progress.update(
+                task,
+                completed=stats.iteration,
+                status=f"{stats.samples_per_s:5.0f} samples/s  reward {stats.mean_reward:.3f}{length}  [{terms}]",
+            )
+
+        result = train_gait(request, on_iteration=show)
+    e = result.evaluation
+    console.print(
+        f"wrote {result.entry} after {result.iterations} iterations, {result.samples:,} samples, "
+        f"{result.wall_clock_s / 60:.1f} min; eval over {e.episodes} episodes: fall rate {e.fall_rate:.3f}, "
+        f"joint RMSE {e.joint_rmse:.3f} rad, speed {e.forward_speed:.2f} m/s (reference {e.reference_speed:.2f})"
+    )
+
+
+def eval_command(
+    gait: str = typer.Argument(..., help="Library entry to evaluate."),
+    episodes: int = typer.Option(256, "--episodes", help="Episodes (one world each)."),
+    seconds: float = typer.Option(20.0, "--seconds", help="Episode length, s."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    push: float = typer.Option(0.0, "--push", help="Largest random push during the episodes, N (0: none)."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+) -> None:
+    """Evaluate a library policy under paper Table 1 randomization: fall rate, tracking errors, episode length."""
+    from gaitlib.training import default_library_dir, load_entry
+    from gaitlib.training.evaluate import evaluate_policy
+
+    entry = load_entry(library or default_library_dir(), gait)
+    result = evaluate_policy(
+        entry.policy,
+        entry.clip,
+        action_scale=entry.action_scale,
+        episodes=episodes,
+        seconds=seconds,
+        backend=backend,
+        push_force=push,
+        seed=seed,
+    )
+    if as_json:
+        print(json.dumps({"gait": gait} | result.as_dict()))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    table.add_row("fall rate", f"{result.fall_rate:.3f}")
+    table.add_row("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}")
+    table.add_row("forward speed (m/s)", f"{result.forward_speed:.3f}")
+    table.add_row("reference speed (m/s)", f"{result.reference_speed:.3f}")
+    table.add_row("speed error", f"{result.speed_error:.3f}")
+    table.add_row("mean episode length (s)", f"{result.mean_episode_seconds:.2f}")
+    Console().print(table)

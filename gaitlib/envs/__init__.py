@@ -1,0 +1,6 @@
+"""The imitation environment (an rsl-rl VecEnv) and its parts: observations, rewards, terminations,
+randomization and pushes, per-world reference tracking."""
+
+from gaitlib.envs.imitation_env import EnvConfig, ImitationEnv
+
+__all__ = ["EnvConfig", "ImitationEnv"]

@@ -1,0 +1,288 @@
+"""The motion-imitation environment: an rsl-rl ``VecEnv`` of N A1 worlds, each imitating a gait's reference clip.
+
+One control step (30 Hz): the action (N, 12) is a residual around the reference pose one step ahead; with action
+noise it becomes the PD targets (clipped to the joint limits); pushes are applied; the backend advances 8 physics
+substeps; the phase advances; reward, terminations and time-outs are computed; finished worlds are reset by
+reference state initialization (a random phase, the reference's state, freshly randomized dynamics); observations
+are built with latency and noise. See :mod:`gaitlib.envs.observations` for the layout.
+
+Beyond rsl-rl's contract the environment exposes what switching needs: :attr:`phase`, :meth:`switch` (make
+worlds imitate another gait from a chosen phase, at this moment), :meth:`reset_worlds` and the per-world
+reference :attr:`reference`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from gaitlib.envs import observations as obs_fn
+from gaitlib.envs import rewards as rew_fn
+from gaitlib.envs.randomization import (
+    PushConfig,
+    PushSchedule,
+    RandomizationConfig,
+    WorldParameters,
+    sample_world_parameters,
+)
+from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
+from gaitlib.envs.rewards import RewardConfig
+from gaitlib.envs.rotations import quat_angle_between, quat_from_yaw, quat_rotate_inverse, yaw_of
+from gaitlib.envs.terminations import TerminationConfig, fallen
+from gaitlib.gaits import ReferenceClip
+from gaitlib.sim import KinematicState, SimBackend, SimState
+
+__all__ = ["EnvConfig", "ImitationEnv"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EnvConfig:
+    """Everything that defines the imitation task apart from the gaits and the backend."""
+
+    episode_seconds: float = 10.0
+    """Episode length before a time-out, s."""
+    action_scale: float = 0.25
+    """PD target = reference joint angles one step ahead + action_scale * action, rad per action unit."""
+    action_clip: float = 4.0
+    """Actions are clipped to +/- this many units before scaling."""
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    """Imitation reward weights and scales."""
+    termination: TerminationConfig = field(default_factory=TerminationConfig)
+    """Early termination thresholds."""
+    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
+    """Domain randomization (paper Table 1)."""
+    pushes: PushConfig = field(default_factory=PushConfig)
+    """Random trunk pushes (off by default)."""
+    random_start_phase: bool = True
+    """Reference state initialization at a uniformly random phase (else at phase 0)."""
+
+
+class ImitationEnv(VecEnv):
+    """N worlds imitating reference clips on a simulation backend (rsl-rl ``VecEnv``)."""
+
+    def __init__(
+        self,
+        backend: SimBackend,
+        clips: list[ReferenceClip],
+        cfg: EnvConfig,
+        *,
+        seed: int = 0,
+    ) -> None:
+        self.backend = backend
+        self.cfg = cfg
+        self.clips = clips
+        self.num_envs = backend.num_worlds
+        self.num_actions = backend.robot.num_joints
+        self.device = backend.device
+        self.dt = backend.control_dt
+        self.max_episode_length = int(round(cfg.episode_seconds / self.dt))
+        self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
+        self.last_episode_length = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
+        """(N,) length in control steps of each world's last finished episode."""
+
+        n, j, dev = self.num_envs, self.num_actions, self.device
+        self._gen = torch.Generator().manual_seed(seed)
+        self.reference = ReferenceTracker(clips, n, dev)
+        self._pushes = PushSchedule(cfg.pushes, n, self.dt, self._gen)
+        self._lower = torch.tensor(backend.robot.joint_lower, device=dev)
+        self._upper = torch.tensor(backend.robot.joint_upper, device=dev)
+        self._action = torch.zeros(n, j, device=dev)  # last action taken (after clipping), action units
+        self._history = torch.zeros(n, obs_fn.HISTORY, obs_fn.FRAME_DIM, device=dev)  # observed frames
+        self._last_reading = torch.zeros(n, obs_fn.FRAME_DIM, device=dev)  # clean frame of the previous step
+        self._params = sample_world_parameters(cfg.randomization, n, self._gen)
+        self._dynamics = torch.zeros(n, 5, device=dev)
+        self._state: SimState = backend.state()
+        self._terms = {name: torch.zeros(n, device=dev) for name in cfg.reward.terms()}
+        self._obs: TensorDict | None = None
+        self.reset_worlds(torch.arange(n, device=dev))
+
+    # ------------------------------------------------------------------------------------------ rsl-rl
+    def get_observations(self) -> TensorDict:
+        assert self._obs is not None
+        return self._obs
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        cfg = self.cfg
+        actions = actions.to(self.device).clamp(-cfg.action_clip, cfg.action_clip)
+        self._action = actions
+        noise = self._noise(actions.shape, cfg.randomization.action_noise)
+        ahead = self.reference.frame(self.dt)
+        targets = ahead.joint_pos + cfg.action_scale * actions + noise
+        self.backend.set_pd_targets(torch.maximum(torch.minimum(targets, self._upper), self._lower))
+
+        changed = self._pushes.advance()
+        if len(changed):
+            self.backend.set_trunk_force(changed, self._pushes.force[changed].to(self.device))
+        diverged = self.backend.step().to(self.device)
+        self.reference.advance(self.dt)
+        self.episode_length_buf += 1
+        self._state = state = self.backend.state()
+
+        ref = self.reference.frame()
+        reward = self._reward(state, ref)
+        terminated = diverged | fallen(
+            state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination
+        )
+        time_out = (self.episode_length_buf >= self.max_episode_length) & ~terminated
+        dones = terminated | time_out
+
+        extras = {
+            "time_outs": time_out,
+            "log": {f"/reward/{name}": value.mean() for name, value in self._terms.items()}
+            | {"/termination/rate": terminated.float().mean(), "/termination/diverged": diverged.float().mean()},
+        }
+        done_ids = dones.nonzero().squeeze(1)
+        self._record_frame()
+        if len(done_ids):
+            self.last_episode_length[done_ids] = self.episode_length_buf[done_ids]
+            self.reset_worlds(done_ids)  # rebuilds the observations
+        else:
+            self._obs = self._observations()
+        return self._obs, reward, dones, extras
+
+    # ------------------------------------------------------------------------------------------ switching
+    @property
+    def phase(self) -> torch.Tensor:
+        """(N,) the phase in [0, 1) of each world's reference."""
+        return self.reference.wrapped_phase
+
+    @property
+    def gait(self) -> torch.Tensor:
+        """(N,) index into ``clips`` of the gait each world imitates."""
+        return self.reference.gait
+
+    @property
+    def sim_state(self) -> SimState:
+        """The backend's readings after the last step."""
+        return self._state
+
+    @property
+    def world_parameters(self) -> WorldParameters:
+        """The randomized parameters of every world since its last reset."""
+        return self._params
+
+    def switch(self, world_ids: torch.Tensor, gait: torch.Tensor, phase: torch.Tensor) -> None:
+        """From now on, worlds ``world_ids`` imitate ``gait`` (k,) starting at ``phase`` (k,) in [0, 1), with the
+        reference re-anchored where each robot stands and faces. Observations are rebuilt for the new reference."""
+        s = self._state
+        self.reference.start(world_ids, gait, phase, s.root_pos[world_ids], s.root_quat[world_ids])
+        self._obs = self._observations()
+
+    def reset_worlds(self, world_ids: torch.Tensor, *, gait: torch.Tensor | None = None) -> None:
+        """Reference state initialization of ``world_ids``: new dynamics, a random (or zero) phase, the reference's
+        state at that phase, a clean history. ``gait`` (k,) picks their gaits (default: keep the current one)."""
+        k = len(world_ids)
+        if gait is not None:
+            self.reference.gait[world_ids] = gait
+        gait_ids = self.reference.gait[world_ids]
+        if self.cfg.random_start_phase:
+            phase = torch.rand(k, generator=self._gen).to(self.device)
+        else:
+            phase = torch.zeros(k, device=self.device)
+        identity = torch.zeros(k, 4, device=self.device)
+        identity[:, 0] = 1.0
+        self.reference.start(world_ids, gait_ids, phase, torch.zeros(k, 3, device=self.device), identity)
+        ref = self.reference.frame(world_ids=world_ids)
+        self._randomize(world_ids)
+        start = KinematicState(
+            root_pos=ref.root_pos,
+            root_quat=ref.root_quat,
+            root_lin_vel=ref.root_lin_vel,
+            root_ang_vel=ref.root_ang_vel,
+            joint_pos=ref.joint_pos,
+            joint_vel=ref.joint_vel,
+        )
+        self.backend.reset(world_ids, start)
+        self._pushes.reset(world_ids.cpu())
+        self.episode_length_buf[world_ids] = 0
+        self._action[world_ids] = 0.0
+        self._state = self.backend.state()
+        reading = self._clean_frame()[world_ids]
+        self._last_reading[world_ids] = reading
+        self._history[world_ids] = reading.unsqueeze(1).expand(-1, obs_fn.HISTORY, -1)
+        self._obs = self._observations()
+
+    # ------------------------------------------------------------------------------------------ internals
+    def _randomize(self, world_ids: torch.Tensor) -> None:
+        k = len(world_ids)
+        params = sample_world_parameters(self.cfg.randomization, k, self._gen)
+        ids = world_ids.cpu()
+        for name in params.__dataclass_fields__:
+            getattr(self._params, name)[ids] = getattr(params, name)
+        self.backend.set_dynamics(
+            world_ids,
+            gravity_scale=params.gravity_scale.to(self.device),
+            mass_scale=params.mass_scale.to(self.device),
+            friction=params.friction.to(self.device),
+        )
+        kp = params.kp.to(self.device).unsqueeze(1).expand(k, self.num_actions)
+        kd = params.kd.to(self.device).unsqueeze(1).expand(k, self.num_actions)
+        self.backend.set_pd_gains(world_ids, kp, kd)
+        self._dynamics[world_ids] = torch.stack(
+            [params.gravity_scale, params.mass_scale, params.friction, params.kp, params.kd], 1
+        ).to(self.device)
+
+    def _noise(self, shape: torch.Size, amplitude: float) -> torch.Tensor:
+        if not self.cfg.randomization.enabled or amplitude == 0.0:
+            return torch.zeros(shape, device=self.device)
+        return (amplitude * (2 * torch.rand(shape, generator=self._gen) - 1)).to(self.device)
+
+    def _clean_frame(self) -> torch.Tensor:
+        s = self._state
+        return obs_fn.proprioceptive_frame(s.joint_pos, s.root_quat, s.root_ang_vel, s.foot_contact, self._action)
+
+    def _record_frame(self) -> None:
+        """Push the newest observed frame (latency-interpolated, noisy) into the history."""
+        reading = self._clean_frame()
+        lag = (self._params.latency.to(self.device) / self.dt).unsqueeze(1)
+        observed = reading + lag * (self._last_reading - reading)
+        sensed = slice(0, obs_fn.FRAME_DIM - self.num_actions)  # actions are known exactly
+        observed[:, sensed] += self._noise(observed[:, sensed].shape, self.cfg.randomization.observation_noise)
+        self._last_reading = reading
+        self._history = torch.cat([observed.unsqueeze(1), self._history[:, :-1]], dim=1)
+
+    def _observations(self) -> TensorDict:
+        frames = [self.reference.frame(k * self.dt) for k in obs_fn.REFERENCE_OFFSETS]
+        actor = torch.cat([self._history.flatten(1), obs_fn.reference_features(frames)], dim=-1)
+        s = self._state
+        privileged = obs_fn.privileged_features(
+            s.root_quat,
+            s.root_lin_vel,
+            s.root_pos[:, 2],
+            self.reference.wrapped_phase,
+            self._dynamics,
+            self._pushes.force.to(self.device),
+        )
+        return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[self.num_envs])
+
+    def _reward(self, s: SimState, ref: ReferenceFrame) -> torch.Tensor:
+        c = self.cfg.reward
+        heading = quat_from_yaw(yaw_of(s.root_quat)).unsqueeze(1)
+        feet = quat_rotate_inverse(heading, s.foot_pos - s.root_pos.unsqueeze(1))
+        self._terms["pose"] = rew_fn.pose_reward(s.joint_pos, ref.joint_pos, scale=c.pose_scale)
+        self._terms["joint_velocity"] = rew_fn.joint_velocity_reward(
+            s.joint_vel, ref.joint_vel, scale=c.joint_velocity_scale
+        )
+        self._terms["end_effector"] = rew_fn.end_effector_reward(
+            feet, ref.foot_pos_heading, scale=c.end_effector_scale, height_weight=c.end_effector_height_weight
+        )
+        self._terms["root_pose"] = rew_fn.root_pose_reward(
+            s.root_pos,
+            ref.root_pos,
+            quat_angle_between(s.root_quat, ref.root_quat),
+            scale=c.root_pose_scale,
+            rotation_weight=c.root_rotation_weight,
+        )
+        self._terms["root_velocity"] = rew_fn.root_velocity_reward(
+            s.root_lin_vel,
+            ref.root_lin_vel,
+            s.root_ang_vel,
+            ref.root_ang_vel,
+            scale=c.root_velocity_scale,
+            angular_weight=c.root_angular_velocity_weight,
+        )
+        weights = c.terms()
+        return sum(weights[name] * value for name, value in self._terms.items())

@@ -1,0 +1,126 @@
+"""Domain randomization and random pushes: every range in one place, beside its line (paper Table 1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+__all__ = ["PushConfig", "PushSchedule", "RandomizationConfig", "WorldParameters", "sample_world_parameters"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class RandomizationConfig:
+    """Uniform ranges, re-sampled per world at every reset (paper Table 1). ``enabled=False`` uses nominal values."""
+
+    enabled: bool = True
+    """Randomize at all; when off every world gets the midpoint gains, unit scales, nominal friction, no noise."""
+    gravity_scale: tuple[float, float] = (0.8, 1.2)  # Table 1: gravity, x nominal
+    action_noise: float = 0.03  # Table 1: additive uniform noise on actions, +/- rad
+    observation_noise: float = 0.03  # Table 1: additive uniform noise on observations, +/-
+    mass_scale: tuple[float, float] = (0.85, 1.15)  # Table 1: rigid body mass, x nominal
+    friction: tuple[float, float] = (0.25, 1.5)  # Table 1: ground friction coefficient
+    latency: tuple[float, float] = (0.0, 0.020)  # Table 1: observation latency, s
+    kp: tuple[float, float] = (45.0, 75.0)  # Table 1: PD stiffness, N m/rad
+    kd: tuple[float, float] = (0.9, 1.8)  # Table 1: PD damping, N m s/rad
+    nominal_friction: float = 0.8  # a1_facts: foot friction, used when randomization is off
+
+
+@dataclass
+class WorldParameters:
+    """One sample of the randomized parameters for k worlds; each tensor (k,)."""
+
+    gravity_scale: torch.Tensor
+    mass_scale: torch.Tensor
+    friction: torch.Tensor
+    latency: torch.Tensor
+    """Observation latency, s."""
+    kp: torch.Tensor
+    """PD stiffness applied to every joint, N m/rad."""
+    kd: torch.Tensor
+    """PD damping applied to every joint, N m s/rad."""
+
+
+def _uniform(bounds: tuple[float, float], k: int, generator: torch.Generator) -> torch.Tensor:
+    low, high = bounds
+    return low + (high - low) * torch.rand(k, generator=generator)
+
+
+def sample_world_parameters(cfg: RandomizationConfig, k: int, generator: torch.Generator) -> WorldParameters:
+    """Draw parameters for ``k`` worlds (on the CPU) from ``cfg``'s ranges, or nominal values if disabled."""
+    if not cfg.enabled:
+        return WorldParameters(
+            gravity_scale=torch.ones(k),
+            mass_scale=torch.ones(k),
+            friction=torch.full((k,), cfg.nominal_friction),
+            latency=torch.zeros(k),
+            kp=torch.full((k,), sum(cfg.kp) / 2),
+            kd=torch.full((k,), sum(cfg.kd) / 2),
+        )
+    return WorldParameters(
+        gravity_scale=_uniform(cfg.gravity_scale, k, generator),
+        mass_scale=_uniform(cfg.mass_scale, k, generator),
+        friction=_uniform(cfg.friction, k, generator),
+        latency=_uniform(cfg.latency, k, generator),
+        kp=_uniform(cfg.kp, k, generator),
+        kd=_uniform(cfg.kd, k, generator),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class PushConfig:
+    """Random horizontal pushes on the trunk: random direction, magnitude, duration and interval."""
+
+    max_force: float = 0.0
+    """Largest push magnitude, N; magnitudes are uniform in [0, max_force]. 0 disables pushes."""
+    fixed_force: bool = False
+    """Push with exactly ``max_force`` every time (the benchmark's fixed magnitudes) instead of a uniform draw."""
+    duration: tuple[float, float] = (0.1, 0.3)  # paper: pushes last 0.1-0.3 s
+    interval: tuple[float, float] = (1.0, 3.0)  # choice: quiet time between pushes, s
+
+
+class PushSchedule:
+    """Per-world push timers, counted in control steps: which worlds start or stop being pushed at each step."""
+
+    def __init__(self, cfg: PushConfig, num_worlds: int, control_dt: float, generator: torch.Generator) -> None:
+        self.cfg = cfg
+        self._dt = control_dt
+        self._gen = generator
+        self.force = torch.zeros(num_worlds, 3)
+        """(N, 3) the push force currently applied, world frame, N."""
+        self._pushing = torch.zeros(num_worlds, dtype=torch.bool)
+        self._steps_left = torch.zeros(num_worlds, dtype=torch.long)  # of the current push or quiet time
+        self.reset(torch.arange(num_worlds))
+
+    def _steps(self, bounds: tuple[float, float], k: int) -> torch.Tensor:
+        return torch.round(_uniform(bounds, k, self._gen) / self._dt).long().clamp(min=1)
+
+    def reset(self, world_ids: torch.Tensor) -> None:
+        """Stop pushing ``world_ids`` and draw their next quiet time."""
+        self.force[world_ids] = 0.0
+        self._pushing[world_ids] = False
+        self._steps_left[world_ids] = self._steps(self.cfg.interval, len(world_ids))
+
+    def advance(self) -> torch.Tensor:
+        """Move the timers on by one control step; return the ids of worlds whose force changed."""
+        if self.cfg.max_force <= 0.0:
+            return torch.zeros(0, dtype=torch.long)
+        self._steps_left -= 1
+        due = (self._steps_left <= 0).nonzero().squeeze(1)
+        if len(due) == 0:
+            return due
+        stop = due[self._pushing[due]]
+        start = due[~self._pushing[due]]
+        self.force[stop] = 0.0
+        self._pushing[stop] = False
+        self._steps_left[stop] = self._steps(self.cfg.interval, len(stop))
+        k = len(start)
+        angle = 2 * torch.pi * torch.rand(k, generator=self._gen)
+        if self.cfg.fixed_force:
+            magnitude = torch.full((k,), self.cfg.max_force)
+        else:
+            magnitude = self.cfg.max_force * torch.rand(k, generator=self._gen)
+        self.force[start] = torch.stack([magnitude * torch.cos(angle), magnitude * torch.sin(angle), 0 * angle], 1)
+        self._pushing[start] = True
+        self._steps_left[start] = self._steps(self.cfg.duration, k)
+        return due

@@ -1,0 +1,123 @@
+"""Per-world reference motion: which gait each world imitates, its phase, and where the reference is anchored.
+
+The reference of a world is its gait's clip placed in the world by a planar transform (an xy offset and a yaw)
+chosen when the world starts or switches, so that the reference begins where the robot stands and faces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gaitlib.envs.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
+from gaitlib.gaits import ClipFrame, ReferenceClip
+
+__all__ = ["ReferenceFrame", "ReferenceTracker"]
+
+
+@dataclass
+class ReferenceFrame:
+    """Reference quantities of N worlds in the world frame (see :class:`~gaitlib.gaits.ClipFrame`)."""
+
+    root_pos: torch.Tensor
+    """(N, 3) m."""
+    root_quat: torch.Tensor
+    """(N, 4) (w, x, y, z)."""
+    root_lin_vel: torch.Tensor
+    """(N, 3) world frame, m/s."""
+    root_ang_vel: torch.Tensor
+    """(N, 3) trunk frame, rad/s."""
+    heading_lin_vel: torch.Tensor
+    """(N, 3) linear velocity in the reference's heading frame, m/s (x: forward speed)."""
+    joint_pos: torch.Tensor
+    """(N, J) rad."""
+    joint_vel: torch.Tensor
+    """(N, J) rad/s."""
+    foot_pos_heading: torch.Tensor
+    """(N, F, 3) feet relative to the trunk in the heading frame, m."""
+    contact: torch.Tensor
+    """(N, F) bool."""
+
+
+class ReferenceTracker:
+    """Gait index, unwrapped phase and anchor of each of N worlds; reads their references at any time offset."""
+
+    def __init__(self, clips: list[ReferenceClip], num_worlds: int, device: torch.device) -> None:
+        self.clips = clips
+        self.device = device
+        self.gait = torch.zeros(num_worlds, dtype=torch.long, device=device)
+        """(N,) index into ``clips`` of the gait each world imitates."""
+        self.phase = torch.zeros(num_worlds, device=device)
+        """(N,) unwrapped phase in cycles (its fractional part is the gait phase)."""
+        self._offset = torch.zeros(num_worlds, 3, device=device)  # anchor translation (z stays 0), m
+        self._yaw = torch.zeros(num_worlds, device=device)  # anchor rotation about z, rad
+        self._rate = torch.tensor([c.phase_rate for c in clips], device=device)
+
+    @property
+    def wrapped_phase(self) -> torch.Tensor:
+        """(N,) phase in [0, 1)."""
+        return torch.remainder(self.phase, 1.0)
+
+    def advance(self, dt: float) -> None:
+        """Move every world's phase on by ``dt`` seconds."""
+        self.phase += dt * self._rate[self.gait]
+
+    def start(
+        self,
+        world_ids: torch.Tensor,
+        gait: torch.Tensor,
+        phase: torch.Tensor,
+        root_pos: torch.Tensor,
+        root_quat: torch.Tensor,
+    ) -> None:
+        """Make ``world_ids`` imitate ``gait`` (k,) from ``phase`` (k,) on, anchored so that the reference's trunk
+        is at the robot's ``root_pos`` (k, 3) (horizontally) and faces the robot's heading (``root_quat`` (k, 4))."""
+        self.gait[world_ids] = gait
+        self.phase[world_ids] = phase
+        clip = self._clip_frames(gait, phase)
+        yaw = yaw_of(root_quat) - yaw_of(clip.root_quat)
+        rotated = quat_rotate(quat_from_yaw(yaw), clip.root_pos)
+        offset = root_pos - rotated
+        offset[:, 2] = 0.0
+        self._offset[world_ids] = offset
+        self._yaw[world_ids] = yaw
+
+    def frame(self, dt: float = 0.0, world_ids: torch.Tensor | None = None) -> ReferenceFrame:
+        """The reference ``dt`` seconds ahead of the current phase, for all worlds or ``world_ids``."""
+        ids = slice(None) if world_ids is None else world_ids
+        gait = self.gait[ids]
+        clip = self._clip_frames(gait, self.phase[ids] + dt * self._rate[gait])
+        anchor = quat_from_yaw(self._yaw[ids])
+        heading = quat_from_yaw(yaw_of(clip.root_quat))
+        rel_feet = clip.foot_pos_world - clip.root_pos.unsqueeze(1)
+        return ReferenceFrame(
+            root_pos=self._offset[ids] + quat_rotate(anchor, clip.root_pos),
+            root_quat=quat_multiply(anchor, clip.root_quat),
+            root_lin_vel=quat_rotate(anchor, clip.root_lin_vel),
+            root_ang_vel=clip.root_ang_vel,
+            heading_lin_vel=quat_rotate_inverse(heading, clip.root_lin_vel),
+            joint_pos=clip.joint_pos,
+            joint_vel=clip.joint_vel,
+            foot_pos_heading=quat_rotate_inverse(heading.unsqueeze(1), rel_feet),
+            contact=clip.contact,
+        )
+
+    def _clip_frames(self, gait: torch.Tensor, phase: torch.Tensor) -> ClipFrame:
+        """Clip frames of each world's own gait (one clip read per gait present)."""
+        if len(self.clips) == 1:
+            return self.clips[0].frame(phase)
+        parts = {}
+        for g in torch.unique(gait).tolist():
+            rows = (gait == g).nonzero().squeeze(1)
+            parts[g] = (rows, self.clips[g].frame(phase[rows]))
+        first = next(iter(parts.values()))[1]
+        merged = {}
+        for name in first.__dataclass_fields__:
+            sample = getattr(first, name)
+            out = torch.empty((len(gait), *sample.shape[1:]), dtype=sample.dtype, device=sample.device)
+            for rows, frame in parts.values():
+                out[rows] = getattr(frame, name)
+            merged[name] = out
+        return ClipFrame(**merged)
+

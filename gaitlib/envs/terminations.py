@@ -1,0 +1,46 @@
+"""Early termination (design brief section 4) as small pure functions over N worlds; each returns (N,) bool."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gaitlib.envs.rotations import quat_angle_between
+
+__all__ = ["TerminationConfig", "fallen", "orientation_lost", "too_low"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TerminationConfig:
+    """Thresholds of early termination."""
+
+    min_height: float = 0.12
+    """Trunk height below which the robot has fallen, m (it stands at about 0.25 m)."""
+    max_orientation_error: float = torch.pi / 2
+    """Largest rotation between the trunk and the reference trunk, rad."""
+
+
+def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:
+    """The trunk (N,) m is below ``min_height``."""
+    return root_height < min_height
+
+
+def orientation_lost(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, *, max_error: float) -> torch.Tensor:
+    """The trunk is rotated more than ``max_error`` rad away from the reference trunk."""
+    return quat_angle_between(root_quat, ref_root_quat) > max_error
+
+
+def fallen(
+    body_contact: torch.Tensor,
+    root_height: torch.Tensor,
+    root_quat: torch.Tensor,
+    ref_root_quat: torch.Tensor,
+    cfg: TerminationConfig,
+) -> torch.Tensor:
+    """Any termination: a non-foot body touches the ground, the trunk is too low, or orientation is lost."""
+    return (
+        body_contact
+        | too_low(root_height, min_height=cfg.min_height)
+        | orientation_lost(root_quat, ref_root_quat, max_error=cfg.max_orientation_error)
+    )

@@ -1,0 +1,150 @@
+"""PPO presets for ``gaitlib train``: the paper's (Table 2) and one tuned for a 2-core CPU."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gaitlib.errors import UnknownNameError
+
+__all__ = ["TrainPreset", "get_preset", "preset_names", "rsl_rl_config"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainPreset:
+    """Everything that sizes a training run: environment count, PPO hyperparameters, network sizes."""
+
+    name: str
+    """Registry name."""
+    num_envs: int
+    """Parallel worlds."""
+    steps_per_env: int
+    """Control steps per world per iteration (rollout length)."""
+    epochs: int
+    """PPO epochs per iteration."""
+    mini_batches: int
+    """Mini-batches per epoch (batch = num_envs * steps_per_env / mini_batches)."""
+    learning_rate: float
+    """Adam learning rate (adapted by the KL schedule)."""
+    gamma: float
+    """Discount factor."""
+    lam: float
+    """GAE lambda."""
+    clip: float
+    """PPO clip ratio."""
+    desired_kl: float
+    """KL target of the adaptive learning-rate schedule."""
+    entropy_coef: float
+    """Entropy bonus."""
+    actor_hidden: tuple[int, ...]
+    """Actor hidden layer sizes (the last is the latent recorded for transitions)."""
+    critic_hidden: tuple[int, ...]
+    """Critic hidden layer sizes."""
+    init_std: float
+    """Initial action standard deviation, action units."""
+    iterations: int
+    """Default number of iterations."""
+    episode_seconds: float = 10.0
+    """Training episode length before a time-out, s."""
+    push_force: float = 60.0
+    """Largest random training push, N (direction random, 0.1-0.3 s, every 1-3 s)."""
+    activation: str = "elu"
+    """Hidden activation."""
+
+    @property
+    def batch_size(self) -> int:
+        """Samples per mini-batch."""
+        return self.num_envs * self.steps_per_env // self.mini_batches
+
+
+_PRESETS = {
+    # Paper Table 2: 4096 envs x 24 steps, 5 epochs, 8 mini-batches of 12288, lr 3e-4, gamma/lambda 0.95,
+    # clip 0.2, KL 0.008, entropy 0. Network sizes are not given there; 512-256-128 is rsl-rl's locomotion default.
+    "paper": TrainPreset(
+        name="paper",
+        num_envs=4096,
+        steps_per_env=24,
+        epochs=5,
+        mini_batches=8,
+        learning_rate=3e-4,
+        gamma=0.95,
+        lam=0.95,
+        clip=0.2,
+        desired_kl=0.008,
+        entropy_coef=0.0,
+        actor_hidden=(512, 256, 128),
+        critic_hidden=(512, 256, 128),
+        init_std=0.5,
+        iterations=3000,
+    ),
+    # 2-core CPU: fewer worlds and smaller networks; measured choice recorded in docs/benchmarks.md.
+    "cpu": TrainPreset(
+        name="cpu",
+        num_envs=256,
+        steps_per_env=24,
+        epochs=4,
+        mini_batches=4,
+        learning_rate=3e-4,
+        gamma=0.95,
+        lam=0.95,
+        clip=0.2,
+        desired_kl=0.008,
+        entropy_coef=0.0,
+        actor_hidden=(256, 128, 64),
+        critic_hidden=(256, 128, 64),
+        init_std=0.5,
+        iterations=1500,
+    ),
+}
+
+
+def get_preset(name: str) -> TrainPreset:
+    """The preset called ``name``; raises :class:`UnknownNameError` for an unknown name."""
+    if name not in _PRESETS:
+        raise UnknownNameError("preset", name, list(_PRESETS))
+    return _PRESETS[name]
+
+
+def preset_names() -> list[str]:
+    """Names of the presets."""
+    return sorted(_PRESETS)
+
+
+def rsl_rl_config(preset: TrainPreset) -> dict:
+    """rsl-rl 5.5 ``OnPolicyRunner`` configuration for ``preset``."""
+    model = {
+        "class_name": "rsl_rl.models.MLPModel",
+        "activation": preset.activation,
+        "obs_normalization": True,
+    }
+    return {
+        "num_steps_per_env": preset.steps_per_env,
+        "save_interval": 10**9,  # gaitlib checkpoints itself
+        "obs_groups": {"actor": ["policy"], "critic": ["policy", "privileged"]},
+        "multi_gpu": None,
+        "check_for_nan": True,
+        "actor": model
+        | {
+            "hidden_dims": list(preset.actor_hidden),
+            "distribution_cfg": {
+                "class_name": "rsl_rl.modules.distribution.GaussianDistribution",
+                "init_std": preset.init_std,
+            },
+        },
+        "critic": model | {"hidden_dims": list(preset.critic_hidden)},
+        "algorithm": {
+            "class_name": "rsl_rl.algorithms.PPO",
+            "num_learning_epochs": preset.epochs,
+            "num_mini_batches": preset.mini_batches,
+            "clip_param": preset.clip,
+            "gamma": preset.gamma,
+            "lam": preset.lam,
+            "value_loss_coef": 1.0,
+            "entropy_coef": preset.entropy_coef,
+            "learning_rate": preset.learning_rate,
+            "max_grad_norm": 1.0,
+            "use_clipped_value_loss": True,
+            "schedule": "adaptive",
+            "desired_kl": preset.desired_kl,
+        },
+    }
+

@@ -1,0 +1,165 @@
+"""The imitation environment on the real MuJoCo backend, a handful of worlds."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import pytest
+import torch
+
+from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs import observations as obs_fn
+from gaitlib.envs.randomization import (
+    PushConfig,
+    PushSchedule,
+    RandomizationConfig,
+    sample_world_parameters,
+)
+from gaitlib.gaits import clip_from_description, get_gait
+from gaitlib.sim import make_backend
+
+
+@pytest.fixture(scope="module")
+def clips():
+    return {name: clip_from_description(get_gait(name)) for name in ("trot", "stand", "pace")}
+
+
+def make_env(clips, names=("trot",), n=4, **cfg):
+    backend = make_backend("mujoco", num_worlds=n)
+    return ImitationEnv(backend, [clips[g] for g in names], EnvConfig(**cfg), seed=3)
+
+
+def test_vec_env_contract(clips) -> None:
+    env = make_env(clips, n=3)
+    obs = env.get_observations()
+    assert obs["policy"].shape == (3, obs_fn.ACTOR_OBS_DIM) == (3, 158)
+    assert obs["privileged"].shape == (3, obs_fn.PRIVILEGED_DIM)
+    assert obs["policy"].dtype == torch.float32
+    assert env.num_actions == 12 and env.max_episode_length == 300
+    obs, reward, dones, extras = env.step(torch.zeros(3, 12))
+    assert reward.shape == (3,) and reward.dtype == torch.float32
+    assert dones.shape == (3,) and dones.dtype == torch.bool
+    assert extras["time_outs"].shape == (3,)
+    assert set(extras["log"]) >= {f"/reward/{t}" for t in ("pose", "joint_velocity", "end_effector", "root_pose")}
+    assert torch.all((reward >= 0) & (reward <= 1))
+
+
+def test_time_outs_are_kept_apart_from_terminations(clips) -> None:
+    env = make_env(clips, names=("stand",), n=2, episode_seconds=0.5, randomization=RandomizationConfig(enabled=False))
+    steps = env.max_episode_length
+    assert steps == 15
+    for i in range(steps):
+        _, _, dones, extras = env.step(torch.zeros(2, 12))
+        if i < steps - 1:
+            assert not dones.any()
+    assert dones.all() and extras["time_outs"].all()
+    assert torch.all(env.episode_length_buf == 0) and torch.all(env.last_episode_length == steps)
+
+
+def test_a_fall_terminates_without_time_out(clips) -> None:
+    env = make_env(clips, names=("stand",), n=2, randomization=RandomizationConfig(enabled=False))
+    env.backend.set_trunk_force(torch.tensor([1]), torch.tensor([[0.0, 800.0, 0.0]]))
+    terminated = torch.zeros(2, dtype=torch.bool)
+    for _ in range(20):
+        _, _, dones, extras = env.step(torch.zeros(2, 12))
+        assert not extras["time_outs"].any()
+        terminated |= dones
+    assert terminated.tolist() == [False, True]
+
+
+def test_standing_reference_held_by_zero_residual_earns_high_reward(clips) -> None:
+    env = make_env(clips, names=("stand",), n=2, randomization=RandomizationConfig(enabled=False))
+    rewards = [env.step(torch.zeros(2, 12))[1] for _ in range(30)]
+    assert torch.stack(rewards[-10:]).mean() > 0.7
+
+
+def test_reference_state_initialization_matches_the_clip(clips) -> None:
+    env = make_env(clips, n=4, randomization=RandomizationConfig(enabled=False))
+    ref = env.reference.frame()
+    state = env.sim_state
+    assert torch.allclose(state.joint_pos, ref.joint_pos, atol=1e-5)
+    assert torch.allclose(state.root_pos[:, 2], ref.root_pos[:, 2], atol=1e-5)
+    assert env.phase.unique().numel() == 4  # random start phases
+
+
+def test_world_parameters_are_resampled_at_reset_within_table_1(clips) -> None:
+    env = make_env(clips, names=("stand",), n=4, episode_seconds=0.1)
+    before = dataclasses.replace(env.world_parameters)
+    before = {k: v.clone() for k, v in vars(before).items()}
+    for _ in range(env.max_episode_length):
+        env.step(torch.zeros(4, 12))
+    after = vars(env.world_parameters)
+    cfg = RandomizationConfig()
+    for name in ("gravity_scale", "mass_scale", "friction", "latency", "kp", "kd"):
+        low, high = getattr(cfg, name)
+        assert torch.all((after[name] >= low) & (after[name] <= high)), name
+        assert not torch.equal(after[name], before[name]), name
+
+
+def test_table_1_ranges_are_covered() -> None:
+    params = sample_world_parameters(RandomizationConfig(), 20000, torch.Generator().manual_seed(0))
+    expected = {
+        "gravity_scale": (0.8, 1.2),
+        "mass_scale": (0.85, 1.15),
+        "friction": (0.25, 1.5),
+        "latency": (0.0, 0.020),
+        "kp": (45.0, 75.0),
+        "kd": (0.9, 1.8),
+    }
+    for name, (low, high) in expected.items():
+        values = getattr(params, name)
+        span = high - low
+        assert values.min() >= low and values.max() <= high, name
+        assert values.min() < low + 0.01 * span and values.max() > high - 0.01 * span, name
+    cfg = RandomizationConfig()
+    assert cfg.action_noise == 0.03 and cfg.observation_noise == 0.03
+
+
+def test_push_schedule_pushes_with_the_configured_force_and_duration() -> None:
+    dt = 1 / 30
+    schedule = PushSchedule(
+        PushConfig(max_force=200.0, fixed_force=True, duration=(0.2, 0.2), interval=(0.5, 0.5)),
+        3,
+        dt,
+        torch.Generator().manual_seed(0),
+    )
+    pushing = []
+    for _ in range(90):  # 3 s: quiet 0.5 s, push 0.2 s, quiet 0.5 s, ...
+        schedule.advance()
+        norms = schedule.force.norm(dim=1)
+        assert torch.all((norms == 0) | ((norms - 200.0).abs() < 1e-3))
+        assert torch.all(schedule.force[:, 2] == 0)
+        pushing.append(bool(norms[0] > 0))
+    runs = [len(list(group)) for _, group in itertools.groupby(pushing)]
+    push_runs, quiet_runs = runs[1:-1:2], runs[2:-1:2]  # complete runs only (the first is quiet)
+    assert len(push_runs) >= 3 and all(n == 6 for n in push_runs)  # 0.2 s at 30 Hz
+    assert all(abs(n - 15) <= 1 for n in quiet_runs)  # 0.5 s
+
+
+def test_observations_are_deterministic_without_randomization(clips) -> None:
+    a = make_env(clips, n=2, randomization=RandomizationConfig(enabled=False), random_start_phase=False)
+    b = make_env(clips, n=2, randomization=RandomizationConfig(enabled=False), random_start_phase=False)
+    actions = 0.3 * torch.ones(2, 12)
+    for _ in range(5):
+        oa = a.step(actions)[0]
+        ob = b.step(actions)[0]
+    assert torch.equal(oa["policy"], ob["policy"])
+    # s_t holds the last three frames, newest first, with the previous action at the end of each frame.
+    frame = oa["policy"][:, : obs_fn.FRAME_DIM]
+    assert torch.allclose(frame[:, -12:], actions)
+
+
+def test_switch_reanchors_the_reference_at_the_chosen_phase(clips) -> None:
+    env = make_env(clips, names=("trot", "pace"), n=2, randomization=RandomizationConfig(enabled=False))
+    for _ in range(10):
+        env.step(torch.zeros(2, 12))
+    state = env.sim_state
+    env.switch(torch.tensor([1]), torch.tensor([1]), torch.tensor([0.25]))
+    assert env.gait.tolist() == [0, 1]
+    assert env.phase[1].item() == pytest.approx(0.25)
+    ref = env.reference.frame()
+    assert torch.allclose(ref.root_pos[1, :2], state.root_pos[1, :2], atol=1e-5)
+    assert torch.allclose(ref.joint_pos[1], clips["pace"].frame(torch.tensor([0.25])).joint_pos[0], atol=1e-5)
+    env.step(torch.zeros(2, 12))
+    assert env.phase[1].item() == pytest.approx(0.25 + env.dt * clips["pace"].phase_rate, abs=1e-5)

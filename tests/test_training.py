@@ -1,0 +1,163 @@
+"""Real PPO iterations on a handful of worlds, library entries, checkpoints, ONNX export, load errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from gaitlib.gaits import get_gait
+from gaitlib.training import LibraryError, get_preset, load_entry
+from gaitlib.training.library import entry_names
+from gaitlib.training.trainer import TrainRequest, train_gait
+
+TINY = dataclasses.replace(
+    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
+    critic_hidden=(32, 16),
+)
+
+
+def request(tmp_path, gait="stand", **kw) -> TrainRequest:
+    base = dict(
+        description=get_gait(gait),
+        preset=TINY,
+        iterations=2,
+        library=tmp_path / "library",
+        run_dir=tmp_path / "runs" / gait,
+        backend="mujoco",
+        checkpoint_every=1,
+        eval_episodes=2,
+        eval_seconds=0.5,
+    )
+    return TrainRequest(**(base | kw))
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """One tiny training run shared by the tests that only read its result."""
+    tmp_path = tmp_path_factory.mktemp("train")
+    seen = []
+    result = train_gait(request(tmp_path), on_iteration=seen.append)
+    return tmp_path, result, seen
+
+
+def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
+    tmp_path, result, seen = trained
+    assert [s.iteration for s in seen] == [1, 2]
+    assert seen[-1].samples == 2 * 4 * 8 and seen[-1].samples_per_s > 0
+    assert set(seen[-1].reward_terms) == {"pose", "joint_velocity", "end_effector", "root_pose", "root_velocity"}
+    entry = load_entry(tmp_path / "library", "stand")
+    first = torch.load(tmp_path / "runs" / "stand" / "checkpoints" / "model_1.pt", weights_only=False)
+    final = entry.policy.actor.state_dict()
+    assert not torch.equal(first["alg"]["actor_state_dict"]["mlp.0.weight"], final["mlp.0.weight"])
+    meta = entry.metadata
+    assert meta["training"]["samples"] == 64 and meta["training"]["preset"]["name"] == "cpu"
+    assert {"fall_rate", "joint_rmse", "forward_speed"} <= set(meta["evaluation"])
+    assert meta["action"]["type"] == "residual_to_reference"
+    assert entry.policy.latent_dim == 16
+
+
+def test_latent_and_value_have_documented_shapes(trained) -> None:
+    tmp_path, _, _ = trained
+    entry = load_entry(tmp_path / "library", "stand")
+    from tensordict import TensorDict
+
+    obs = TensorDict({"policy": torch.randn(5, 158), "privileged": torch.randn(5, 14)}, batch_size=[5])
+    action, latent = entry.policy.act_and_latent(obs)
+    assert action.shape == (5, 12) and latent.shape == (5, 16) and entry.policy.value(obs).shape == (5,)
+    assert torch.allclose(action, entry.policy.act(obs))
+
+
+def test_onnx_export_matches_the_torch_actor(trained) -> None:
+    from onnx.reference import ReferenceEvaluator
+
+    tmp_path, _, _ = trained
+    entry = load_entry(tmp_path / "library", "stand")
+    x = torch.randn(3, 158)
+    from tensordict import TensorDict
+
+    expected = entry.policy.act(TensorDict({"policy": x, "privileged": torch.zeros(3, 14)}, batch_size=[3]))
+    session = ReferenceEvaluator(str(tmp_path / "library" / "stand" / "policy.onnx"))
+    (got,) = session.run(None, {"obs": x.numpy()})
+    np.testing.assert_allclose(got, expected.numpy(), atol=1e-5)
+
+
+def test_training_one_gait_leaves_other_entries_untouched(tmp_path) -> None:
+    first = train_gait(request(tmp_path, iterations=1))
+    before = {p.name: p.read_bytes() for p in first.entry.iterdir()}
+    train_gait(request(tmp_path, gait="trot", iterations=1))
+    assert entry_names(tmp_path / "library") == ["stand", "trot"]
+    assert {p.name: p.read_bytes() for p in first.entry.iterdir()} == before
+
+
+def test_resume_continues_from_the_checkpoint(tmp_path) -> None:
+    def stop_after_first(stats):
+        if stats.iteration == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train_gait(request(tmp_path, iterations=3), on_iteration=stop_after_first)
+    saved = torch.load(tmp_path / "runs" / "stand" / "checkpoints" / "latest.pt", weights_only=False)
+    assert saved["iteration"] == 1 and saved["samples"] == 32
+    assert not (tmp_path / "library" / "stand").exists()  # nothing half-written
+    seen = []
+    result = train_gait(request(tmp_path, iterations=3, resume=True), on_iteration=seen.append)
+    assert [s.iteration for s in seen] == [2, 3]
+    assert result.samples == 3 * 32
+
+
+def test_resume_without_checkpoint_is_an_error(tmp_path) -> None:
+    from gaitlib.errors import GaitlibError
+
+    with pytest.raises(GaitlibError, match="nothing to resume"):
+        train_gait(request(tmp_path, resume=True))
+
+
+def _copy_entry(trained, tmp_path):
+    import shutil
+
+    src = trained[0] / "library" / "stand"
+    shutil.copytree(src, tmp_path / "stand")
+    return tmp_path
+
+
+def test_missing_entry_is_a_clear_error(tmp_path) -> None:
+    with pytest.raises(LibraryError, match="no library entry for gait 'pace'"):
+        load_entry(tmp_path, "pace")
+
+
+def test_entry_of_another_format_version_is_refused(trained, tmp_path) -> None:
+    library = _copy_entry(trained, tmp_path)
+    meta_path = library / "stand" / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    meta["format_version"] = 99
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(LibraryError, match="format version 99"):
+        load_entry(library, "stand")
+
+
+def test_entry_with_another_observation_layout_is_refused(trained, tmp_path) -> None:
+    library = _copy_entry(trained, tmp_path)
+    meta_path = library / "stand" / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    meta["observation"]["reference_offsets"] = [1, 2, 3, 4]
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(LibraryError, match="another observation layout"):
+        load_entry(library, "stand")
+
+
+def test_damaged_weights_are_refused(trained, tmp_path) -> None:
+    library = _copy_entry(trained, tmp_path)
+    (library / "stand" / "policy.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(LibraryError, match="damaged"):
+        load_entry(library, "stand")
+
+
+def test_garbage_metadata_is_refused(trained, tmp_path) -> None:
+    library = _copy_entry(trained, tmp_path)
+    (library / "stand" / "metadata.json").write_text("{not json")
+    with pytest.raises(LibraryError, match="unreadable metadata"):
+        load_entry(library, "stand")
