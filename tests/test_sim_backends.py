@@ -184,3 +184,16 @@ def test_diverging_world_is_reported_and_reset(make) -> None:
     assert torch.allclose(s.joint_pos[1], start.joint_pos[0], atol=1e-5)
     assert torch.allclose(s.root_pos[0], before.root_pos[0], atol=0.01)
     assert not backend.step()[1]  # the force was cleared with the reset
+
+
+def test_set_dynamics_keeps_the_world_where_it_is(make) -> None:
+    backend = make(2)
+    hold(backend, 10)
+    before = backend.state()
+    ids = torch.arange(2)
+    backend.set_dynamics(ids, gravity_scale=torch.ones(2), mass_scale=torch.full((2,), 1.1), friction=torch.ones(2))
+    backend.set_pd_gains(ids, torch.full((2, 12), 70.0), torch.full((2, 12), 1.0))
+    backend.step()
+    after = backend.state()
+    assert torch.allclose(after.root_pos, before.root_pos, atol=0.01)
+    assert torch.allclose(after.joint_pos, before.joint_pos, atol=0.05)

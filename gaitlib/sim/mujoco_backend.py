@@ -70,6 +70,7 @@ class MujocoBackend(SimBackend):
         self._trunk = base.body(robot.trunk_body).id
         self._robot_bodies = np.arange(1, base.nbody)
         self._gravity = base.opt.gravity.copy()
+        self._scratch = mujoco.MjData(base)  # mj_setConst overwrites its data's state: never a world's own
         # sensordata layout (see the MJCF): contacts per foot (F), all robot contacts (1), foot positions (F x 3)
         adr = {base.sensor(i).name: int(base.sensor_adr[i]) for i in range(base.nsensor)}
         self._foot_contact_adr = np.array([adr[f"{f}_contact"] for f in robot.foot_names])
@@ -148,12 +149,12 @@ class MujocoBackend(SimBackend):
         g, s, mu = _np(gravity_scale), _np(mass_scale), _np(friction)
         bodies = self._robot_bodies
         for row, i in enumerate(ids):
-            m, d = self._models[i], self._datas[i]
+            m = self._models[i]
             m.opt.gravity[:] = self._gravity * g[row]
             m.body_mass[bodies] = self._base.body_mass[bodies] * s[row]
             m.body_inertia[bodies] = self._base.body_inertia[bodies] * s[row]
             m.geom_friction[:, 0] = mu[row]  # robot and floor alike: MuJoCo takes the max of the pair
-            mujoco.mj_setConst(m, d)  # refresh derived masses (subtree mass, inverse weights)
+            mujoco.mj_setConst(m, self._scratch)  # refresh derived masses (subtree mass, inverse weights)
 
     def set_trunk_force(self, world_ids: torch.Tensor, force: torch.Tensor) -> None:
         ids = _indices(world_ids)
