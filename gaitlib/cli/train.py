@@ -70,14 +70,16 @@ def train_command(
     with Progress(*columns, console=console) as progress:
         task = progress.add_task("train", total=request.iterations, gait=gait, status="starting")
 
+        last_line = [0.0]
+
         def show(stats) -> None:
             terms = " ".join(f"{k[:4]} {v:.2f}" for k, v in stats.reward_terms.items())
             length = "" if math.isnan(stats.mean_episode_length) else f" ep {stats.mean_episode_length:4.1f}s"
-            progress.update(
-                task,
-                completed=stats.iteration,
-                status=f"{stats.samples_per_s:5.0f} samples/s  reward {stats.mean_reward:.3f}{length}  [{terms}]",
-            )
+            status = f"{stats.samples_per_s:5.0f} samples/s  reward {stats.mean_reward:.3f}{length}  [{terms}]"
+            progress.update(task, completed=stats.iteration, status=status)
+            if not console.is_terminal and stats.elapsed - last_line[0] >= 30.0:  # logs get a line every 30 s
+                last_line[0] = stats.elapsed
+                console.print(f"iteration {stats.iteration}/{stats.total} {stats.elapsed:7.0f}s  {status}")
 
         result = train_gait(request, on_iteration=show)
     e = result.evaluation
