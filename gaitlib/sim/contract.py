@@ -10,7 +10,8 @@ Conventions for every tensor (``N`` = number of worlds, ``k`` = number of select
 * World frame: z up, gravity along -z. Quaternions are ``(w, x, y, z)`` and rotate trunk-frame vectors into the
   world frame.
 * Joint tensors follow :attr:`gaitlib.robots.RobotSpec.joint_names`; foot tensors follow ``foot_names``.
-* PD law applied at every physics substep: ``tau = clip(kp * (q_target - q) - kd * qd, -tau_max, tau_max)``.
+* PD law applied at every physics substep: ``tau = clip(kp * (q_target - q) - kd * qd, -tau_max, tau_max)``,
+  with ``q_target`` clipped to the joint range (the MJCF actuators' ``ctrlrange``).
 
 Readings (:meth:`SimBackend.state`) are taken after the last physics substep; contact flags and foot positions
 come from that substep's collision pass (at most one physics step, 1/240 s, old).

@@ -47,6 +47,8 @@ if TYPE_CHECKING:
 
 __all__ = ["NewtonBackend"]
 
+wp.config.quiet = True  # Warp's module-load lines would mix into the commands' output (e.g. --json)
+
 _DIVERGENCE_LIMIT = 1.0e4
 """A world whose |qpos| or |qvel| entry exceeds this (m, rad, m/s, rad/s) or is non-finite has diverged."""
 

@@ -76,10 +76,11 @@ _PRESETS = {
         init_std=0.5,
         iterations=3000,
     ),
-    # 2-core CPU: fewer worlds and smaller networks; measured choice recorded in docs/benchmarks.md.
+    # 2-core CPU: fewer worlds and smaller networks. benchmarks/train_presets.py (docs/benchmarks.md) compared
+    # 128, 256 and 512 worlds and 5x8 updates for 4 min each: 512 worlds learned most per wall-clock second.
     "cpu": TrainPreset(
         name="cpu",
-        num_envs=256,
+        num_envs=512,
         steps_per_env=24,
         epochs=4,
         mini_batches=4,
@@ -92,7 +93,7 @@ _PRESETS = {
         actor_hidden=(256, 128, 64),
         critic_hidden=(256, 128, 64),
         init_std=0.5,
-        iterations=1500,
+        iterations=1000,
     ),
 }
 

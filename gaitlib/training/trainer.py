@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import math
 import os
 import time
 from collections.abc import Callable
@@ -40,6 +41,8 @@ class TrainRequest:
     """Sizes and PPO hyperparameters."""
     iterations: int
     """PPO iterations to run in total (a resumed run continues up to this count)."""
+    time_limit_s: float | None = None
+    """Stop after the iteration during which this much training time (s, resumed runs included) has passed."""
     library: Path
     """Where the trained entry is written (``library/<gait>/``)."""
     run_dir: Path
@@ -114,6 +117,7 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
     checkpoints.mkdir(parents=True, exist_ok=True)
     latest = checkpoints / "latest.pt"
     start, samples, elapsed = 0, 0, 0.0
+    curve: list[list] = []  # learning curve rows: iteration, training time s, mean reward, mean episode s
     if request.resume:
         if not latest.is_file():
             raise GaitlibError(f"nothing to resume: no checkpoint at {latest}")
@@ -125,6 +129,7 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
             )
         alg.load(saved["alg"], None, strict=True)
         start, samples, elapsed = saved["iteration"], saved["samples"], saved["elapsed"]
+        curve = saved["curve"]
 
     def checkpoint(iteration: int, name: str = "latest.pt") -> None:
         state = {
@@ -135,6 +140,7 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
             "gait": request.description.name,
             "preset": preset.name,
             "seed": request.seed,
+            "curve": curve,
         }
         tmp = checkpoints / f".{name}.tmp"
         torch.save(state, tmp)
@@ -179,17 +185,22 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
                 losses={k: float(v) for k, v in losses.items()},
             )
             _log(writer, stats)
+            length = stats.mean_episode_length
+            curve.append([stats.iteration, round(elapsed, 1), round(stats.mean_reward, 4),
+                          None if math.isnan(length) else round(length, 2)])
             if on_iteration is not None:
                 on_iteration(stats)
             if completed % request.checkpoint_every == 0:
                 checkpoint(completed)
                 checkpoint(completed, f"model_{completed}.pt")
+            if request.time_limit_s is not None and elapsed >= request.time_limit_s:
+                break
     except KeyboardInterrupt:
         checkpoint(completed)
         writer.close()
         sim.close()
         raise
-    checkpoint(request.iterations)
+    checkpoint(completed)
     writer.close()
     sim.close()
 
@@ -218,18 +229,18 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
         training={
             "preset": dataclasses.asdict(preset),
             "backend": backend_name,
-            "iterations": request.iterations,
+            "iterations": completed,
             "samples": samples,
             "wall_clock_s": round(elapsed, 1),
             "seed": request.seed,
             "push_force_max_n": preset.push_force,
             "episode_seconds": preset.episode_seconds,
+            "curve": {"columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
+                      "rows": curve[:: max(1, len(curve) // 60)] + curve[-1:]},
         },
         evaluation=evaluation.as_dict(),
     )
-    return TrainResult(
-        entry=entry, iterations=request.iterations, samples=samples, wall_clock_s=elapsed, evaluation=evaluation
-    )
+    return TrainResult(entry=entry, iterations=completed, samples=samples, wall_clock_s=elapsed, evaluation=evaluation)
 
 
 def _log(writer, stats: IterationStats) -> None:
@@ -237,7 +248,7 @@ def _log(writer, stats: IterationStats) -> None:
     writer.add_scalar("train/mean_reward", stats.mean_reward, step)
     writer.add_scalar("train/samples_per_s", stats.samples_per_s, step)
     writer.add_scalar("train/wall_clock_s", stats.elapsed, step)
-    if stats.mean_episode_length == stats.mean_episode_length:  # not NaN
+    if not math.isnan(stats.mean_episode_length):
         writer.add_scalar("train/mean_episode_length_s", stats.mean_episode_length, step)
     for name, value in stats.reward_terms.items():
         writer.add_scalar(f"reward/{name}", value, step)
