@@ -197,3 +197,17 @@ def test_set_dynamics_keeps_the_world_where_it_is(make) -> None:
     after = backend.state()
     assert torch.allclose(after.root_pos, before.root_pos, atol=0.01)
     assert torch.allclose(after.joint_pos, before.joint_pos, atol=0.05)
+
+
+def test_feet_stay_on_top_of_the_ground_whatever_the_friction(make) -> None:
+    """Pyramidal friction cones soften the normal contact as friction grows; the model's impratio keeps the feet
+    from sinking at the high end of the randomized friction range (paper Table 1: 0.25-1.5)."""
+    backend = make(2)
+    ids = torch.arange(2)
+    backend.set_dynamics(ids, gravity_scale=torch.full((2,), 1.2), mass_scale=torch.full((2,), 1.15),
+                         friction=torch.tensor([0.25, 1.5]))
+    hold(backend, 60)
+    s = backend.state()
+    assert torch.all(s.foot_pos[..., 2] > a1.FOOT_RADIUS - 0.004)  # sunk at most 4 mm
+    assert (s.root_pos[0, 2] - s.root_pos[1, 2]).abs() < 0.003
+    assert not s.body_contact.any()
