@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["GaitError", "GaitlibError", "SimulationError", "UnknownNameError"]
+__all__ = ["GaitError", "GaitlibError", "SimulationError", "TransitionDataError", "UnknownNameError"]
 
 
 class GaitlibError(Exception):
@@ -25,3 +25,8 @@ class SimulationError(GaitlibError):
 
 class GaitError(GaitlibError):
     """A gait description or reference motion file is malformed, or describes a gait the robot cannot perform."""
+
+
+class TransitionDataError(GaitlibError):
+    """A transition-sample file or transition-net is unreadable, foreign, of another version, or does not match
+    the current library or collection settings."""

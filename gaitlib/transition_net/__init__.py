@@ -1,0 +1,27 @@
+"""The transition-net: predicts whether switching from gait m to gait n at destination phase phi_n succeeds, from
+the source policy's latent (or, as ablations, the phases or the explicit state). Features, model, balanced
+dataset, fitting, and storage."""
+
+from gaitlib.transition_net.dataset import BalancedSplit, balanced_split
+from gaitlib.transition_net.features import INPUT_KINDS, FeatureSpec, batch_features, build_features
+from gaitlib.transition_net.fit import EpochStats, FitConfig, FitResult, fit
+from gaitlib.transition_net.model import TransitionNet
+from gaitlib.transition_net.storage import SavedNet, load_net, read_metadata, save_net
+
+__all__ = [
+    "INPUT_KINDS",
+    "BalancedSplit",
+    "EpochStats",
+    "FeatureSpec",
+    "FitConfig",
+    "FitResult",
+    "SavedNet",
+    "TransitionNet",
+    "balanced_split",
+    "batch_features",
+    "build_features",
+    "fit",
+    "load_net",
+    "read_metadata",
+    "save_net",
+]

@@ -1,0 +1,33 @@
+"""Transition samples: the HDF5 schema they are stored in, the explicit state, and the collector that draws them
+by switching library policies at random moments and phases."""
+
+from gaitlib.transitions.collector import CollectConfig, CollectProgress, CollectResult, collect
+from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT, explicit_state
+from gaitlib.transitions.schema import (
+    SCHEMA_NAME,
+    SCHEMA_VERSION,
+    TransitionBatch,
+    TransitionData,
+    TransitionFileInfo,
+    TransitionHeader,
+    read,
+    validate,
+)
+
+__all__ = [
+    "EXPLICIT_DIM",
+    "EXPLICIT_LAYOUT",
+    "SCHEMA_NAME",
+    "SCHEMA_VERSION",
+    "CollectConfig",
+    "CollectProgress",
+    "CollectResult",
+    "TransitionBatch",
+    "TransitionData",
+    "TransitionFileInfo",
+    "TransitionHeader",
+    "collect",
+    "explicit_state",
+    "read",
+    "validate",
+]

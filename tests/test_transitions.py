@@ -1,0 +1,244 @@
+"""Transition samples: the HDF5 schema (round trip, repair, clear errors) and real collections with tiny policies."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from gaitlib.errors import TransitionDataError
+from gaitlib.gaits import get_gait
+from gaitlib.training import get_preset, load_entry
+from gaitlib.training.trainer import TrainRequest, train_gait
+from gaitlib.transitions import CollectConfig, collect, explicit_state, read, schema, validate
+from gaitlib.transitions.schema import COLUMNS, TransitionBatch, TransitionHeader
+
+TINY = dataclasses.replace(
+    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
+    critic_hidden=(32, 16),
+)
+GAITS = ["stand", "trot"]
+# Short cycles keep the collections to a few seconds; with strong pushes (up to 400 N) the untrained policies fall
+# often enough for both labels.
+QUICK = CollectConfig(
+    samples=24, num_worlds=4, horizon_s=1.5, warmup_s=0.3, source_extra_s=0.5, push_max=400.0, backend="mujoco",
+    batch_size=8,
+)
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory):
+    """A library of two tiny one-iteration policies."""
+    root = tmp_path_factory.mktemp("library")
+    for gait in GAITS:
+        train_gait(
+            TrainRequest(
+                description=get_gait(gait), preset=TINY, iterations=1, library=root / "library",
+                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
+            )
+        )
+    return root / "library"
+
+
+@pytest.fixture(scope="module")
+def interrupted(library, tmp_path_factory):
+    """A collection stopped by Ctrl-C after its first chunk, the file's columns then, and the resumed result."""
+    path = tmp_path_factory.mktemp("collect") / "samples.h5"
+
+    def stop(progress):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        collect(path, library=library, gaits=GAITS, config=QUICK, progress=stop)
+    before = read(path).samples
+    seen = []
+    result = collect(path, library=library, gaits=GAITS, config=QUICK, progress=seen.append)
+    return path, before, result, seen
+
+
+def synthetic(n: int, *, latent_dim: int = 4, start: int = 0, seed: int = 0) -> TransitionBatch:
+    rng = np.random.default_rng(seed)
+    source = rng.integers(0, 2, n)
+    return TransitionBatch(
+        source=source,
+        dest=1 - source,
+        latent=rng.normal(size=(n, latent_dim)),
+        phase_source=rng.random(n),
+        phase_dest=rng.random(n),
+        explicit=rng.normal(size=(n, 66)),
+        value_source=rng.normal(size=n),
+        value_dest=rng.normal(size=n),
+        push_force=rng.random(n) * 100,
+        success=rng.integers(0, 2, n),
+        switch_time=rng.random(n) * 3,
+        world=np.arange(start, start + n) % 4,
+        chunk=np.full(n, start),
+    )
+
+
+HEADER = TransitionHeader(gaits=("stand", "trot"), identities=("a" * 64, "b" * 64), latent_dim=4, settings={"h": 2.0})
+
+
+def make_file(path, *batches: TransitionBatch):
+    schema.create(path, gaits=list(HEADER.gaits), identities=list(HEADER.identities), latent_dim=4,
+                  settings=HEADER.settings)
+    with schema.open_for_append(path, expect=HEADER) as target:
+        for batch in batches:
+            schema.append(target.file, batch)
+    return path
+
+
+def one_line_error(path) -> str:
+    with pytest.raises(TransitionDataError) as caught:
+        validate(path)
+    message = str(caught.value)
+    assert "\n" not in message
+    return message
+
+
+# ------------------------------------------------------------------------------------------------------ schema
+def test_batch_fields_are_the_schema_columns() -> None:
+    assert [f.name for f in dataclasses.fields(TransitionBatch)] == list(COLUMNS)
+
+
+def test_appended_batches_read_back_exactly(tmp_path) -> None:
+    first, second = synthetic(5), synthetic(7, start=5, seed=1)
+    path = make_file(tmp_path / "t.h5", first, second)
+    data = read(path)
+    expected = TransitionBatch.concatenate([first, second])
+    for name, values in expected.columns().items():
+        np.testing.assert_array_equal(getattr(data.samples, name), values)
+        assert getattr(data.samples, name).dtype == np.dtype(COLUMNS[name].dtype)
+    info = validate(path)
+    assert info.count == 12 and info.note is None and info.header == HEADER
+    with h5py.File(path) as f:
+        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION
+        ds = f["latent"]
+        assert ds.compression == "gzip" and ds.chunks is not None and ds.maxshape == (None, 4)
+        assert "description" in ds.attrs and f["push_force"].attrs["units"] == "N"
+
+
+def test_create_refuses_an_existing_file(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5")
+    with pytest.raises(TransitionDataError, match="already exists"):
+        make_file(path)
+
+
+def test_rows_left_by_an_interrupted_append_are_cut_on_open(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(6))
+    with h5py.File(path, "r+") as f:  # a crash after some datasets grew, before the count was committed
+        for name in ("source", "dest", "latent"):
+            f[name].resize(9, axis=0)
+    assert "3 uncommitted rows" in validate(path).note
+    assert len(read(path).samples) == 6
+    with schema.open_for_append(path, expect=HEADER) as target:
+        assert target.count == 6 and "cut 3 uncommitted rows" in target.note
+        schema.append(target.file, synthetic(2, start=6))
+    info = validate(path)
+    assert info.count == 8 and info.note is None
+
+
+def test_appending_with_other_settings_or_identities_is_refused(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(2))
+    with pytest.raises(TransitionDataError, match=r"other settings \(h: 2.0 in the file, 1.0 now\)"):
+        schema.open_for_append(path, expect=dataclasses.replace(HEADER, settings={"h": 1.0}))
+    with pytest.raises(TransitionDataError, match="other library policies for trot"):
+        schema.open_for_append(path, expect=dataclasses.replace(HEADER, identities=("a" * 64, "c" * 64)))
+
+
+def test_truncated_file_is_one_clear_error(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(300))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    assert "corrupt or truncated" in one_line_error(path)
+
+
+def test_foreign_and_non_hdf5_files_are_clear_errors(tmp_path) -> None:
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["x"] = np.arange(3)
+    assert "not gaitlib transition data (no 'schema' attribute)" in one_line_error(foreign)
+    text = tmp_path / "notes.h5"
+    text.write_text("hello")
+    assert "not an HDF5 file" in one_line_error(text)
+    assert "no transition file" in one_line_error(tmp_path / "missing.h5")
+
+
+def test_other_schema_version_and_short_datasets_are_clear_errors(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(5))
+    other = shutil.copy(path, tmp_path / "v2.h5")
+    with h5py.File(other, "r+") as f:
+        f.attrs["schema_version"] = 2
+    assert "schema version 2; this gaitlib reads version 1" in one_line_error(other)
+    with h5py.File(path, "r+") as f:
+        f["world"].resize(3, axis=0)
+    assert "inconsistent dataset lengths: 5 samples committed but 'world' has 3 rows" in one_line_error(path)
+
+
+def test_explicit_state_drops_the_actions_of_each_frame() -> None:
+    obs = torch.arange(2 * 158, dtype=torch.float32).reshape(2, 158)
+    state = explicit_state(obs)
+    assert state.shape == (2, 66)
+    np.testing.assert_array_equal(state[0, 22:44], obs[0, 34:56])
+
+
+# ------------------------------------------------------------------------------------------------- collection
+def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -> None:
+    path, _, result, _ = interrupted
+    info = validate(path)
+    assert info.count == result.samples == 24
+    assert info.header.gaits == tuple(GAITS)
+    assert info.header.identities == tuple(load_entry(library, g).identity for g in GAITS)
+    assert info.header.settings["horizon_s"] == QUICK.horizon_s and info.header.settings["backend"] == "mujoco"
+    assert info.header.settings["push_max_n"] == QUICK.push_max
+    s = read(path).samples
+    assert set(s.success.tolist()) == {0, 1}
+    assert np.all(s.source != s.dest) and set(s.source.tolist()) == {0, 1}
+    counts = np.bincount(s.source, minlength=2)
+    assert abs(counts[0] - counts[1]) <= QUICK.num_worlds  # pairs are filled evenly
+    assert s.latent.shape == (24, 16) and s.explicit.shape == (24, 66)
+    assert np.all((s.phase_source >= 0) & (s.phase_source < 1) & (s.phase_dest >= 0) & (s.phase_dest < 1))
+    assert np.all(s.switch_time >= QUICK.warmup_s - 1e-4)
+    assert np.all((s.push_force >= 0) & (s.push_force <= QUICK.push_max + 1e-3)) and s.push_force.max() > 0
+    assert np.all((s.world >= 0) & (s.world < 4))
+    gravity = np.linalg.norm(s.explicit[:, 12:15], axis=1)  # newest frame's projected gravity: a unit vector
+    assert np.all(np.abs(gravity - 1) < 0.1)
+    assert np.all(np.isfinite(s.value_source)) and np.all(np.isfinite(s.value_dest))
+
+
+def test_interrupted_collection_resumes_without_loss_or_duplicates(interrupted) -> None:
+    path, before, result, seen = interrupted
+    assert len(before) == 8 and result.written == 16
+    after = read(path)
+    for name, values in before.columns().items():  # what was written survives unchanged
+        np.testing.assert_array_equal(getattr(after.samples, name)[:8], values)
+    chunks = after.samples.chunk
+    assert np.all(np.diff(chunks) >= 0) and chunks[0] == 0 and set(chunks[8:].tolist()) == {1, 2}
+    sessions = after.info.sessions
+    assert [s["first_chunk"] for s in sessions] == [0, 1] and [s["samples_at_start"] for s in sessions] == [0, 8]
+    assert sessions[0]["env_seed"] != sessions[1]["env_seed"]
+    assert [p.samples for p in seen] == [16, 24] and seen[-1].samples_per_s > 0
+    assert sum(n for _, n in seen[-1].pair_counts.values()) == 24
+    assert set(seen[-1].success_rates) <= {("stand", "trot"), ("trot", "stand")}
+
+
+def test_complete_file_is_left_alone_and_other_settings_are_refused(library, interrupted) -> None:
+    path = interrupted[0]
+    result = collect(path, library=library, gaits=GAITS, config=QUICK)
+    assert result.written == 0 and result.samples == 24
+    with pytest.raises(TransitionDataError, match="other settings"):
+        collect(path, library=library, gaits=GAITS, config=dataclasses.replace(QUICK, samples=30, horizon_s=2.0))
+
+
+def test_pushes_are_recorded_and_pairs_can_be_restricted(library, tmp_path) -> None:
+    config = dataclasses.replace(
+        QUICK, samples=8, horizon_s=1.5, warmup_s=1.0, source_extra_s=1.0, push_max=300.0, pairs=(("trot", "stand"),)
+    )
+    collect(tmp_path / "p.h5", library=library, gaits=GAITS, config=config)
+    s = read(tmp_path / "p.h5").samples
+    assert np.all(s.source == 1) and np.all(s.dest == 0)
+    assert np.all((s.push_force >= 0) & (s.push_force <= 300.0 + 1e-3)) and s.push_force.max() > 0
