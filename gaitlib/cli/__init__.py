@@ -6,7 +6,7 @@ import sys
 
 import typer
 
-from gaitlib.cli import bench, train
+from gaitlib.cli import bench, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -20,6 +20,8 @@ app = typer.Typer(
 )
 app.command("train")(train.train_command)
 app.command("eval")(train.eval_command)
+app.command("collect")(transitions.collect_command)
+app.command("fit")(transitions.fit_command)
 app.add_typer(bench.app, name="bench")
 
 
@@ -31,7 +33,7 @@ def main() -> None:
         print(f"gaitlib: error: {error}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
-        print("gaitlib: interrupted", file=sys.stderr)
+        print("gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr)
         sys.exit(130)
     except typer.Exit as exit_:
         sys.exit(exit_.exit_code)

@@ -3,6 +3,7 @@ the source policy's latent (or, as ablations, the phases or the explicit state).
 dataset, fitting, and storage."""
 
 from gaitlib.transition_net.dataset import BalancedSplit, balanced_split
+from gaitlib.transition_net.evaluate import evaluate_net
 from gaitlib.transition_net.features import INPUT_KINDS, FeatureSpec, batch_features, build_features
 from gaitlib.transition_net.fit import EpochStats, FitConfig, FitResult, fit
 from gaitlib.transition_net.model import TransitionNet
@@ -20,6 +21,7 @@ __all__ = [
     "balanced_split",
     "batch_features",
     "build_features",
+    "evaluate_net",
     "fit",
     "load_net",
     "read_metadata",

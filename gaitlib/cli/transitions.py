@@ -1,0 +1,174 @@
+"""``gaitlib collect`` (transition samples to HDF5) and ``gaitlib fit`` (the transition-net)."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import typer
+
+__all__ = ["collect_command", "fit_command"]
+
+PAPER_PAIRS = ("stand-pace", "stand-trot", "pace-trot", "pace-stand", "trot-pace", "trot-stand")
+"""Column order of paper Table 3 (S-P, S-T, P-T, P-S, T-P, T-S)."""
+PAPER_TABLE_3 = {
+    "phase": (88.94, 87.59, 63.86, 67.42, 66.14, 65.01),
+    "explicit": (89.15, 87.5, 81.26, 78.01, 76.16, 71.85),
+    "latent": (87.14, 86.97, 82.45, 78.68, 78.3, 75.49),
+}
+"""Paper Table 3: balanced validation accuracy (%) per input kind, 5500 samples per pair."""
+
+
+def _parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ...] | None:
+    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it."""
+    if text is None:
+        return None
+    pairs: list[tuple[str, str]] = []
+    for item in (part.strip() for part in text.split(",") if part.strip()):
+        if "-" in item:
+            m, n = item.split("-", 1)
+            pairs.append((m, n))
+        else:
+            pairs += [(item, g) for g in gaits if g != item] + [(g, item) for g in gaits if g != item]
+    return tuple(dict.fromkeys(pairs))
+
+
+def collect_command(
+    samples: float = typer.Option(2e6, "--samples", help="Samples the file holds when done (2e6 is accepted)."),
+    out: Path = typer.Option(Path("data/transitions.h5"), "--out", help="HDF5 file (resumed if it exists)."),
+    gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
+    pairs: str | None = typer.Option(
+        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it."
+    ),
+    push_max: float = typer.Option(0.0, "--push-max", help="Largest random push, N (0: none)."),
+    horizon: float = typer.Option(2.0, "--horizon", help="Time after the switch that decides success, s."),
+    worlds: int = typer.Option(256, "--worlds", help="Parallel worlds."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Collect policy-switch samples into HDF5: run m, switch to n at a random phase, label whether it stays up."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from gaitlib.training import default_library_dir
+    from gaitlib.training.library import entry_names
+    from gaitlib.transitions import CollectConfig, collect
+
+    library = library or default_library_dir()
+    names = [g.strip() for g in gaits.split(",")] if gaits else entry_names(library)
+    config = CollectConfig(
+        samples=int(samples),
+        num_worlds=worlds,
+        horizon_s=horizon,
+        push_max=push_max,
+        pairs=_parse_pairs(pairs, names),
+        backend=backend,
+        seed=seed,
+    )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    console = Console(stderr=True)
+    columns = (
+        TextColumn("[bold]collect"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[status]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=console) as progress:
+        task = progress.add_task("collect", total=config.samples, status="starting")
+
+        def show(p) -> None:
+            rates = " ".join(f"{m}-{n} {r:.2f}" for (m, n), r in sorted(p.success_rates.items()))
+            status = f"{p.samples_per_s:6.1f} samples/s  success [{rates}]"
+            progress.update(task, completed=p.samples, status=status)
+            if not console.is_terminal:
+                console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}")
+
+        result = collect(out, library=library, gaits=names, config=config, progress=show)
+    if result.note:
+        console.print(result.note)
+    console.print(
+        f"{result.path}: {result.samples:,} samples ({result.written:,} new, {result.samples_per_s:.1f}/s); "
+        + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items()))
+    )
+
+
+def fit_command(
+    data: Path = typer.Option(Path("data/transitions.h5"), "--data", help="HDF5 transition samples."),
+    input_kind: str = typer.Option("latent", "--input", help="latent, phase or explicit."),
+    epochs: int = typer.Option(100, "--epochs", help="Training epochs."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    ablation: bool = typer.Option(False, "--ablation", help="Fit all three inputs and compare with the paper."),
+    evaluate: bool = typer.Option(False, "--evaluate", help="Score the shipped net on --data instead of fitting."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Fit the transition-net (balanced per pair, held-out balanced validation) and write it to the library."""
+    from gaitlib.training import default_library_dir, load_entry
+    from gaitlib.transition_net import INPUT_KINDS, FitConfig, evaluate_net, fit, load_net, save_net
+    from gaitlib.transitions import read
+
+    library = library or default_library_dir()
+    net_path = library / "transition_net" / "net.pt"
+    if input_kind not in INPUT_KINDS:
+        from gaitlib.errors import UnknownNameError
+
+        raise UnknownNameError("input", input_kind, list(INPUT_KINDS))
+    samples = read(data)
+    if evaluate:
+        gaits = samples.header.gaits
+        saved = load_net(net_path, identities={g: load_entry(library, g).identity for g in gaits})
+        accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, samples).items()}
+        _report({"input": saved.metadata["input"], "data": str(data), "accuracy": accuracy}, as_json)
+        return
+    kinds = list(INPUT_KINDS) if ablation else [input_kind]
+    results = {kind: fit(samples, FitConfig(kind=kind, epochs=epochs, seed=seed)) for kind in kinds}
+    shipped = results.get("latent", results[kinds[0]])
+    save_net(net_path, shipped)
+    table = {
+        kind: {f"{m}-{n}": a for (m, n), a in result.validation_accuracy.items()} for kind, result in results.items()
+    }
+    report = {
+        "data": str(data),
+        "samples": len(samples.samples),
+        "balanced_validation_accuracy": table,
+        "paper_table_3": {kind: dict(zip(PAPER_PAIRS, row, strict=True)) for kind, row in PAPER_TABLE_3.items()},
+        "written": str(net_path),
+    }
+    _write_json_atomically(net_path.with_name("accuracy.json"), report)
+    _report(report, as_json)
+
+
+def _report(report: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(report))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    rows = report.get("balanced_validation_accuracy") or {"shipped net": report["accuracy"]}
+    pairs = [p for p in PAPER_PAIRS if any(p in r for r in rows.values())]
+    pairs += sorted({p for r in rows.values() for p in r} - set(pairs))
+    table = Table(title="balanced accuracy (%) per ordered pair (paper Table 3 layout)")
+    table.add_column("input")
+    for pair in pairs:
+        table.add_column(pair, justify="right")
+    for kind, accuracy in rows.items():
+        table.add_row(kind, *(f"{100 * accuracy[p]:.2f}" if p in accuracy else "-" for p in pairs))
+        if kind in PAPER_TABLE_3:
+            paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
+            table.add_row(f"  paper {kind}", *(f"{paper[p]:.2f}" if p in paper else "-" for p in pairs))
+    Console().print(table)
+
+
+def _write_json_atomically(path: Path, payload: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    with os.fdopen(fd, "w") as handle:
+        json.dump(payload, handle, indent=2)
+        handle.write("\n")
+    os.replace(tmp, path)

@@ -1,0 +1,86 @@
+"""``gaitlib collect`` and ``gaitlib fit`` end to end on a library of tiny one-iteration policies."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import h5py
+import pytest
+
+from gaitlib.cli.transitions import _parse_pairs
+from gaitlib.gaits import get_gait
+from gaitlib.training import get_preset
+from gaitlib.training.trainer import TrainRequest, train_gait
+from gaitlib.transitions import validate
+
+TINY = dataclasses.replace(
+    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
+    critic_hidden=(32, 16),
+)
+QUICK = ["--worlds", "4", "--horizon", "1.5", "--push-max", "400", "--backend", "mujoco"]
+
+
+def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cli-transitions")
+    for gait in ("stand", "trot"):
+        train_gait(
+            TrainRequest(
+                description=get_gait(gait), preset=TINY, iterations=1, library=root / "library",
+                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
+            )
+        )
+    return root / "library"
+
+
+def test_pairs_accept_ordered_pairs_and_whole_gaits() -> None:
+    gaits = ["pace", "stand", "trot"]
+    assert _parse_pairs("trot-stand,pace-stand", gaits) == (("trot", "stand"), ("pace", "stand"))
+    assert set(_parse_pairs("trot", gaits)) == {("trot", "pace"), ("trot", "stand"), ("pace", "trot"), ("stand", "trot")}
+    assert _parse_pairs(None, gaits) is None
+
+
+def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
+    data = str(tmp_path / "samples.h5")
+    lib = str(library)
+    first = gaitlib("collect", "--samples", "16", "--out", data, "--library", lib, *QUICK)
+    assert first.returncode == 0, first.stderr
+    assert validate(data).count == 16
+    resumed = gaitlib("collect", "--samples", "3.2e1", "--out", data, "--library", lib, *QUICK)
+    assert resumed.returncode == 0, resumed.stderr
+    assert validate(data).count == 32 and "16 new" in resumed.stderr
+
+    fitted = gaitlib("fit", "--data", data, "--epochs", "3", "--library", lib, "--json")
+    assert fitted.returncode == 0, fitted.stderr
+    report = json.loads(fitted.stdout)
+    assert set(report["balanced_validation_accuracy"]) == {"latent"}
+    assert (library / "transition_net" / "net.pt").is_file()
+    assert json.loads((library / "transition_net" / "accuracy.json").read_text()) == report
+
+    scored = gaitlib("fit", "--evaluate", "--data", data, "--library", lib, "--json")
+    assert scored.returncode == 0, scored.stderr
+    accuracy = json.loads(scored.stdout)["accuracy"]
+    assert set(accuracy) <= {"stand-trot", "trot-stand"} and accuracy
+    assert all(0.0 <= a <= 1.0 for a in accuracy.values())
+
+
+def test_foreign_hdf5_is_one_error_line(tmp_path) -> None:
+    path = tmp_path / "foreign.h5"
+    with h5py.File(path, "w") as f:
+        f["images"] = [1, 2, 3]
+    result = gaitlib("fit", "--data", str(path), "--library", str(tmp_path))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("gaitlib: error:") and "foreign.h5" in lines[0]
