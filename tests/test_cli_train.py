@@ -49,3 +49,34 @@ def test_unknown_preset_is_one_error_line(tmp_path) -> None:
     result = gaitlib("train", "stand", "--preset", "gpu-cluster", "--library", str(tmp_path))
     assert result.returncode == 2
     assert result.stderr.strip() == "gaitlib: error: unknown preset 'gpu-cluster' (known: cpu, paper)"
+
+
+def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
+    import signal
+    import time
+
+    import torch
+
+    library, runs = tmp_path / "library", tmp_path / "runs"
+    args = ["train", "stand", "--iterations", "1000", "--checkpoint-every", "1", "--eval-episodes", "2",
+            "--library", str(library), "--run-dir", str(runs)]
+    process = subprocess.Popen(
+        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    latest = runs / "checkpoints" / "latest.pt"
+    deadline = time.monotonic() + 300
+    while not latest.exists() and time.monotonic() < deadline:
+        time.sleep(0.5)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=300)
+    assert process.returncode == 130
+    assert stderr.strip().splitlines()[-1].startswith("gaitlib: interrupted; finished work is saved")
+    saved = torch.load(latest, weights_only=False)
+    assert saved["iteration"] >= 1 and not (library / "stand").exists()
+    resumed = gaitlib("train", "stand", "--iterations", str(saved["iteration"] + 1), "--resume",
+                      "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs))
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"after {saved['iteration'] + 1} iterations" in resumed.stderr

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+import click
 import typer
 
 from gaitlib.cli import bench, train, transitions
@@ -32,18 +33,15 @@ def main() -> None:
     except GaitlibError as error:
         print(f"gaitlib: error: {error}", file=sys.stderr)
         sys.exit(2)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, click.exceptions.Abort):  # click turns Ctrl-C into Abort
         print("gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr)
         sys.exit(130)
-    except typer.Exit as exit_:
+    except click.exceptions.Exit as exit_:
         sys.exit(exit_.exit_code)
-    except typer.Abort:
-        print("gaitlib: aborted", file=sys.stderr)
+    except click.ClickException as error:  # usage errors arrive here in non-standalone mode
+        error.show()
+        sys.exit(error.exit_code)
+    except OSError as error:  # a full disk, a read-only folder: nothing already written is lost (atomic writes)
+        where = f" ({error.filename})" if error.filename else ""
+        print(f"gaitlib: error: {error.strerror or error}{where}", file=sys.stderr)
         sys.exit(1)
-    except Exception as error:  # click usage errors arrive here in non-standalone mode
-        import click
-
-        if isinstance(error, click.ClickException):
-            error.show()
-            sys.exit(error.exit_code)
-        raise

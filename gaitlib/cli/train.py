@@ -81,14 +81,15 @@ def train_command(
             progress.update(task, completed=stats.iteration, status=status)
             if not console.is_terminal and stats.elapsed - last_line[0] >= 30.0:  # logs get a line every 30 s
                 last_line[0] = stats.elapsed
-                console.print(f"iteration {stats.iteration}/{stats.total} {stats.elapsed:7.0f}s  {status}")
+                console.print(f"iteration {stats.iteration}/{stats.total} {stats.elapsed:7.0f}s  {status}", soft_wrap=True)
 
         result = train_gait(request, on_iteration=show)
     e = result.evaluation
     console.print(
         f"wrote {result.entry} after {result.iterations} iterations, {result.samples:,} samples, "
         f"{result.wall_clock_s / 60:.1f} min; eval over {e.episodes} episodes: fall rate {e.fall_rate:.3f}, "
-        f"joint RMSE {e.joint_rmse:.3f} rad, speed {e.forward_speed:.2f} m/s (reference {e.reference_speed:.2f})"
+        f"joint RMSE {e.joint_rmse:.3f} rad, speed {e.forward_speed:.2f} m/s (reference {e.reference_speed:.2f})",
+        soft_wrap=True,
     )
 
 

@@ -86,14 +86,15 @@ def collect_command(
             status = f"{p.samples_per_s:6.1f} samples/s  success [{rates}]"
             progress.update(task, completed=p.samples, status=status)
             if not console.is_terminal:
-                console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}")
+                console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)
 
         result = collect(out, library=library, gaits=names, config=config, progress=show)
     if result.note:
         console.print(result.note)
     console.print(
         f"{result.path}: {result.samples:,} samples ({result.written:,} new, {result.samples_per_s:.1f}/s); "
-        + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items()))
+        + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items())),
+        soft_wrap=True,
     )
 
 

@@ -102,6 +102,7 @@ def save_entry(
     library.mkdir(parents=True, exist_ok=True)
     final = library / description.name
     staging = Path(tempfile.mkdtemp(prefix=f".{description.name}.", dir=library))
+    staging.chmod(0o755)  # mkdtemp makes it private; an entry is meant to be shared
     try:
         weights = staging / "policy.pt"
         torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
