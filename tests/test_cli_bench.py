@@ -7,6 +7,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 EXPECTED_KEYS = {"backend", "worlds", "control_hz", "substeps", "env_steps_per_s", "raw_steps_per_s", "ratio"}
 
 
@@ -49,3 +51,10 @@ def test_help_lists_only_working_commands() -> None:
     panel = result.stdout.split("Commands")[1]
     listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))
     assert listed == {"bench", "collect", "eval", "fit", "train"}
+
+
+@pytest.mark.newton
+def test_bench_sim_newton_stdout_is_only_the_json_object() -> None:
+    result = gaitlib("bench", "sim", "--backend", "newton", "--worlds", "2", "--seconds", "0.3", "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["backend"] == "newton"

@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 
 __all__ = ["NewtonBackend"]
 
-wp.config.quiet = True  # Warp's module-load lines would mix into the commands' output (e.g. --json)
+wp.config.log_level = wp.LOG_WARNING  # Warp's init and module-load lines would mix into --json output
 
 _DIVERGENCE_LIMIT = 1.0e4
 """A world whose |qpos| or |qvel| entry exceeds this (m, rad, m/s, rad/s) or is non-finite has diverged."""
