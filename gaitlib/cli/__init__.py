@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 
-import click
 import typer
 
 from gaitlib.cli import bench, train, transitions
@@ -27,21 +26,27 @@ app.add_typer(bench.app, name="bench")
 
 
 def main() -> None:
-    """Console entry point: run the app, turning gaitlib errors and Ctrl-C into one line on stderr."""
+    """Console entry point: run the app, turning gaitlib errors, OS errors and Ctrl-C into one line on stderr."""
     try:
-        app(standalone_mode=False)
+        code = app(standalone_mode=False)  # typer turns Ctrl-C inside a command into exit code 130
     except GaitlibError as error:
         print(f"gaitlib: error: {error}", file=sys.stderr)
         sys.exit(2)
-    except (KeyboardInterrupt, click.exceptions.Abort):  # click turns Ctrl-C into Abort
-        print("gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr)
-        sys.exit(130)
-    except click.exceptions.Exit as exit_:
-        sys.exit(exit_.exit_code)
-    except click.ClickException as error:  # usage errors arrive here in non-standalone mode
-        error.show()
-        sys.exit(error.exit_code)
+    except (KeyboardInterrupt, typer.Abort):
+        code = 130
+    except typer.Exit as exit_:
+        code = exit_.exit_code
+    except typer.TyperException as error:  # usage errors (typer's own click exceptions) in non-standalone mode
+        show = getattr(error, "show", None)
+        if show is not None:
+            show()
+        else:
+            print(f"gaitlib: error: {error}", file=sys.stderr)
+        sys.exit(getattr(error, "exit_code", 2))
     except OSError as error:  # a full disk, a read-only folder: nothing already written is lost (atomic writes)
         where = f" ({error.filename})" if error.filename else ""
         print(f"gaitlib: error: {error.strerror or error}{where}", file=sys.stderr)
         sys.exit(1)
+    if code == 130:
+        print("gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr)
+    sys.exit(code if isinstance(code, int) else 0)
