@@ -40,8 +40,8 @@ def train_command(
 ) -> None:
     """Train one gait policy with PPO and write it to the library (other gaits are never touched)."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir, get_preset
     from gaitlib.training.trainer import TrainRequest, train_gait
 
@@ -61,16 +61,8 @@ def train_command(
         eval_episodes=eval_episodes,
     )
     console = Console(stderr=True)
-    columns = (
-        TextColumn("[bold]train {task.fields[gait]}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[status]}"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=console) as progress:
-        task = progress.add_task("train", total=request.iterations, gait=gait, status="starting")
+    with job_progress(console, f"train {gait}") as progress:
+        task = progress.add_task("train", total=request.iterations, status="starting")
 
         last_line = [0.0]
 

@@ -51,8 +51,8 @@ def collect_command(
 ) -> None:
     """Collect policy-switch samples into HDF5: run m, switch to n at a random phase, label whether it stays up."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir
     from gaitlib.training.library import entry_names
     from gaitlib.transitions import CollectConfig, collect
@@ -70,15 +70,7 @@ def collect_command(
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     console = Console(stderr=True)
-    columns = (
-        TextColumn("[bold]collect"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[status]}"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=console) as progress:
+    with job_progress(console, "collect") as progress:
         task = progress.add_task("collect", total=config.samples, status="starting")
 
         def show(p) -> None:
