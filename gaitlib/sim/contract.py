@@ -20,7 +20,7 @@ come from that substep's collision pass (at most one physics step, 1/240 s, old)
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import torch
 
@@ -45,10 +45,6 @@ class KinematicState:
     """(k, J) joint angles, rad."""
     joint_vel: torch.Tensor
     """(k, J) joint velocities, rad/s."""
-
-    def select(self, index: torch.Tensor) -> KinematicState:
-        """Rows ``index`` of every field (a new state; tensors are gathered, not views)."""
-        return type(self)(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
 
 @dataclass
