@@ -10,7 +10,12 @@ Every world loops through the same cycle, all worlds at once (per-world state ma
    uniform however often a source falls);
 3. record psi_m, phi_m, the explicit state and m's critic value, switch to n at a uniform phi_n (the reference
    re-anchored where the robot stands) and record n's critic value on the new observation;
-4. run n's policy for ``horizon_s``: alpha = 0 at the first termination, 1 if none; then back to 1.
+4. run n's policy for ``horizon_s``: alpha = 0 at the first termination, 1 if none.
+5. after a fall, back to 1. After a success the world goes on without a reset (``chain``): n, which has just run
+   for ``horizon_s``, becomes the next source, of the least-sampled pair starting from n, unless that pair is
+   more than one batch of worlds ahead of the least-sampled pair overall (then back to 1); the next switch comes
+   after a uniform time in [0, ``source_extra_s``]. This is how a robot runs on the meta-controller (one gait
+   after another) and it saves the warm-up of most samples.
 
 At every step each world is driven by the policy of the gait it currently imitates. Episodes are made far longer
 than any cycle, so time-outs never cut a sample. With ``push_max`` > 0 the environment's random pushes (random
@@ -67,8 +72,10 @@ class CollectConfig:
     """Time after the switch within which no termination means success, s."""
     warmup_s: float = 1.0
     """Shortest time the source policy runs after a reset before it may be switched, s."""
-    source_extra_s: float = 2.0
-    """After the warm-up the source runs a further time drawn uniformly from [0, this], s."""
+    source_extra_s: float = 1.0
+    """After the warm-up (or a chained success) the source runs a further time drawn uniformly from [0, this], s."""
+    chain: bool = True
+    """After a successful switch the destination becomes the next source without a reset (see the module doc)."""
     push_max: float = 0.0
     """Largest random push magnitude, N (uniform in [0, push_max]); 0 disables pushes."""
     pairs: tuple[tuple[str, str], ...] | None = None
@@ -99,6 +106,8 @@ class CollectProgress:
     """(successes, samples) per ordered pair, over the whole file."""
     source_falls: int
     """Cycles of this run discarded because the source policy fell before the switch."""
+    steps_per_sample: float
+    """Control steps (summed over worlds) this run took per sample written."""
 
     @property
     def success_rates(self) -> dict[tuple[str, str], float]:
@@ -121,6 +130,8 @@ class CollectResult:
     pair_counts: dict[tuple[str, str], tuple[int, int]]
     """(successes, samples) per ordered pair, over the whole file."""
     source_falls: int
+    steps_per_sample: float
+    """Control steps (summed over worlds) this run took per sample written."""
     note: str | None
     """What opening the file repaired (rows of an interrupted append), else ``None``."""
 
@@ -157,6 +168,7 @@ def collect(
         "pushes_during": "whole cycle (warm-up, source, horizon); push_force: largest during the horizon",
         "pairs": [list(p) for p in pairs],
         "pair_choice": "least-sampled ordered pair at each reset, ties at random; phase_dest uniform in [0, 1)",
+        "chain": cfg.chain,
         "backend": backend_name,
         "seed": cfg.seed,
         "randomization": dataclasses.asdict(RandomizationConfig()),
@@ -173,7 +185,7 @@ def collect(
         f, count = target.file, target.count
         counts = _pair_counts(f, count, len(gaits))
         if count >= cfg.samples:
-            return CollectResult(output, count, 0, 0.0, 0.0, _named(counts, gaits), 0, target.note)
+            return CollectResult(output, count, 0, 0.0, 0.0, _named(counts, gaits), 0, 0.0, target.note)
         chunk = int(f["chunk"][count - 1]) + 1 if count else 0
         env_seed, draw_seed = (int(s) for s in np.random.SeedSequence([cfg.seed, chunk]).generate_state(2))
         sim = make_backend(backend_name, num_worlds=cfg.num_worlds, device=cfg.device)
@@ -234,6 +246,7 @@ def collect(
                                     elapsed_s=elapsed,
                                     pair_counts=_named(counts, gaits),
                                     source_falls=run.source_falls,
+                                    steps_per_sample=run.world_steps / max(written, 1),
                                 )
                             )
         except KeyboardInterrupt:
@@ -241,7 +254,15 @@ def collect(
             raise
         elapsed = time.perf_counter() - start
         return CollectResult(
-            output, count, written, elapsed, written / elapsed, _named(counts, gaits), run.source_falls, target.note
+            output,
+            count,
+            written,
+            elapsed,
+            written / elapsed,
+            _named(counts, gaits),
+            run.source_falls,
+            run.world_steps / max(written, 1),
+            target.note,
         )
     finally:
         target.close()
@@ -266,7 +287,10 @@ class _Run:
         self.env = env
         self.policies = policies
         self.source_falls = 0
+        self.world_steps = 0
+        """Control steps taken over all worlds."""
         dev, n = env.device, env.num_envs
+        self._chain = cfg.chain
         self._dev = dev
         self._gen = torch.Generator().manual_seed(seed)
         self._pair_source = torch.tensor([m for m, _ in pairs], device=dev)
@@ -304,11 +328,16 @@ class _Run:
         finished = self._in_horizon & (fell | (self._steps_left <= 0))
         source_fell = ~self._in_horizon & fell
         due = ~self._in_horizon & ~fell & (self._steps_left <= 0)
+        self.world_steps += env.num_envs
         if finished.any():
             self._finish(finished.nonzero().squeeze(1), ~fell)
         self.source_falls += int(source_fell.sum())
-        if finished.any():
-            self._restart(finished.nonzero().squeeze(1), new_pair=True)
+        chained = finished & ~fell & self._chain
+        if chained.any():
+            chained = self._continue(chained.nonzero().squeeze(1))
+        restart = finished & ~chained
+        if restart.any():
+            self._restart(restart.nonzero().squeeze(1), new_pair=True)
         if source_fell.any():
             self._restart(source_fell.nonzero().squeeze(1), new_pair=False)
         if due.any():
@@ -342,6 +371,24 @@ class _Run:
         self._in_horizon[ids] = False
         extra = torch.randint(self._extra + 1, (k,), generator=self._gen).to(self._dev)
         self._steps_left[ids] = self._warmup + extra
+
+    def _continue(self, ids: torch.Tensor) -> torch.Tensor:
+        """Chain worlds ``ids`` (just through a successful switch) into a new cycle from the gait they now run, where
+        that keeps the pairs balanced; returns the (N,) mask of the worlds chained."""
+        gait = self.env.gait[ids].cpu()
+        candidates = self._pair_source.cpu().unsqueeze(0) == gait.unsqueeze(1)  # (k, P)
+        keys = torch.where(candidates, self._load.unsqueeze(0).float(), torch.inf)
+        keys = keys + 0.5 * torch.rand(keys.shape, generator=self._gen)
+        best_key, best = keys.min(dim=1)
+        ok = best_key <= float(self._load.min() + self.env.num_envs)
+        chosen = torch.zeros(self.env.num_envs, dtype=torch.bool)
+        chosen[ids.cpu()[ok]] = True
+        ids, best = ids[ok.to(ids.device)], best[ok]
+        self._pair[ids] = best.to(self._dev)
+        self._load += torch.bincount(best, minlength=len(self._load))
+        self._in_horizon[ids] = False
+        self._steps_left[ids] = torch.randint(self._extra + 1, (len(ids),), generator=self._gen).to(self._dev)
+        return chosen.to(self._dev)
 
     def _least_sampled(self, k: int) -> torch.Tensor:
         """(k,) pairs for k new cycles, filling up the least-sampled pairs first (ties at random)."""
