@@ -51,6 +51,7 @@ def collect_command(
 ) -> None:
     """Collect policy-switch samples into HDF5: run m, switch to n at a random phase, label whether it stays up."""
     from rich.console import Console
+    from rich.markup import escape
 
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir
@@ -75,7 +76,7 @@ def collect_command(
 
         def show(p) -> None:
             rates = " ".join(f"{m}-{n} {r:.2f}" for (m, n), r in sorted(p.success_rates.items()))
-            status = f"{p.samples_per_s:6.1f} samples/s  success [{rates}]"
+            status = escape(f"{p.samples_per_s:6.1f} samples/s  success [{rates}]")
             progress.update(task, completed=p.samples, status=status)
             if not console.is_terminal:
                 console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)

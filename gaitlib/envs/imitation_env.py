@@ -171,6 +171,29 @@ class ImitationEnv(VecEnv):
         self.reference.start(world_ids, gait, phase, s.root_pos[world_ids], s.root_quat[world_ids])
         self._obs = self._observations()
 
+    def preview_switch(self, world_ids: torch.Tensor, gait: torch.Tensor, phases: torch.Tensor) -> TensorDict:
+        """The observations worlds ``world_ids`` (k,) would have right after ``switch`` to ``gait`` (k,) at each of
+        the candidate ``phases`` (C,), as k * C rows (world-major); nothing changes in the environment."""
+        k, c = len(world_ids), len(phases)
+        rows = world_ids.repeat_interleave(c)
+        preview = ReferenceTracker(self.clips, k * c, self.device)
+        s = self._state
+        preview.start(
+            torch.arange(k * c, device=self.device),
+            gait.repeat_interleave(c),
+            phases.to(self.device).repeat(k),
+            s.root_pos[rows],
+            s.root_quat[rows],
+        )
+        return self._observations(preview, rows)
+
+    def enable_pushes(self, world_ids: torch.Tensor, enabled: bool) -> None:
+        """Let random pushes hit worlds ``world_ids`` (the first after a fresh quiet time), or start no new push on
+        them (a push under way runs out). Worlds start enabled; a reset keeps the setting."""
+        ids = world_ids.cpu()
+        self._pushes.enable(ids, enabled)
+        self.backend.set_trunk_force(world_ids, self._pushes.force[ids].to(self.device))
+
     def reset_worlds(self, world_ids: torch.Tensor, *, gait: torch.Tensor | None = None) -> None:
         """Reference state initialization of ``world_ids``: new dynamics, a random (or zero) phase, the reference's
         state at that phase, a clean history. ``gait`` (k,) picks their gaits (default: keep the current one)."""
@@ -244,19 +267,23 @@ class ImitationEnv(VecEnv):
         self._last_reading = reading
         self._history = torch.cat([observed.unsqueeze(1), self._history[:, :-1]], dim=1)
 
-    def _observations(self) -> TensorDict:
-        frames = [self.reference.frame(k * self.dt) for k in obs_fn.REFERENCE_OFFSETS]
-        actor = torch.cat([self._history.flatten(1), obs_fn.reference_features(frames)], dim=-1)
+    def _observations(self, reference: ReferenceTracker | None = None, rows: torch.Tensor | None = None) -> TensorDict:
+        """Observations of every world under its reference, or of the worlds ``rows`` (R,) under ``reference`` (a
+        tracker of R rows)."""
+        reference = reference or self.reference
+        ids = slice(None) if rows is None else rows
+        frames = [reference.frame(k * self.dt) for k in obs_fn.REFERENCE_OFFSETS]
+        actor = torch.cat([self._history[ids].flatten(1), obs_fn.reference_features(frames)], dim=-1)
         s = self._state
         privileged = obs_fn.privileged_features(
-            s.root_quat,
-            s.root_lin_vel,
-            s.root_pos[:, 2],
-            self.reference.wrapped_phase,
-            self._dynamics,
-            self._pushes.force.to(self.device),
+            s.root_quat[ids],
+            s.root_lin_vel[ids],
+            s.root_pos[ids, 2],
+            reference.wrapped_phase,
+            self._dynamics[ids],
+            self._pushes.force.to(self.device)[ids],
         )
-        return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[self.num_envs])
+        return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[len(actor)])
 
     def _reward(self, s: SimState, ref: ReferenceFrame) -> torch.Tensor:
         c = self.cfg.reward

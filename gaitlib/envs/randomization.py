@@ -90,7 +90,16 @@ class PushSchedule:
         """(N, 3) the push force currently applied, world frame, N."""
         self._pushing = torch.zeros(num_worlds, dtype=torch.bool)
         self._steps_left = torch.zeros(num_worlds, dtype=torch.long)  # of the current push or quiet time
+        self.enabled = torch.ones(num_worlds, dtype=torch.bool)
+        """(N,) which worlds may be pushed."""
         self.reset(torch.arange(num_worlds))
+
+    def enable(self, world_ids: torch.Tensor, enabled: bool) -> None:
+        """Let ``world_ids`` be pushed (after a fresh quiet time), or start no new push on them (a push under way
+        runs out)."""
+        self.enabled[world_ids] = enabled
+        if enabled:
+            self.reset(world_ids)
 
     def _steps(self, bounds: tuple[float, float], k: int) -> torch.Tensor:
         return torch.round(_uniform(bounds, k, self._gen) / self._dt).long().clamp(min=1)
@@ -106,11 +115,11 @@ class PushSchedule:
         if self.cfg.max_force <= 0.0:
             return torch.zeros(0, dtype=torch.long)
         self._steps_left -= 1
-        due = (self._steps_left <= 0).nonzero().squeeze(1)
+        due = ((self._steps_left <= 0) & (self.enabled | self._pushing)).nonzero().squeeze(1)
         if len(due) == 0:
             return due
         stop = due[self._pushing[due]]
-        start = due[~self._pushing[due]]
+        start = due[~self._pushing[due] & self.enabled[due]]
         self.force[stop] = 0.0
         self._pushing[stop] = False
         self._steps_left[stop] = self._steps(self.cfg.interval, len(stop))

@@ -18,9 +18,11 @@ Every world loops through the same cycle, all worlds at once (per-world state ma
    after another) and it saves the warm-up of most samples.
 
 At every step each world is driven by the policy of the gait it currently imitates. Episodes are made far longer
-than any cycle, so time-outs never cut a sample. With ``push_max`` > 0 the environment's random pushes (random
-horizontal direction, 0.1-0.3 s, every 1-3 s) act throughout the cycle, as in the benchmark, and each sample
-records the largest push magnitude applied during its horizon.
+than any cycle, so time-outs never cut a sample. With ``push_max`` > 0 random pushes (random horizontal direction,
+0.1-0.3 s, magnitude uniform in [0, ``push_max``], a quiet time in ``push_interval_s`` between them) hit the robot
+while the source runs; from the switch on no new push starts (one under way runs out), so the outcome is decided
+by the state the switch finds, which is what the transition-net sees. Each sample records the largest push
+magnitude of its source run.
 
 Samples are written in batches through :mod:`gaitlib.transitions.schema`; rerunning with the same output file
 resumes (new random numbers, the count continues, nothing written is lost or repeated), and Ctrl-C writes the
@@ -78,6 +80,8 @@ class CollectConfig:
     """After a successful switch the destination becomes the next source without a reset (see the module doc)."""
     push_max: float = 0.0
     """Largest random push magnitude, N (uniform in [0, push_max]); 0 disables pushes."""
+    push_interval_s: tuple[float, float] = (0.2, 1.0)
+    """Quiet time between pushes while the source runs, s (uniform in this range)."""
     pairs: tuple[tuple[str, str], ...] | None = None
     """Ordered (source, destination) gait pairs to sample, uniformly; ``None``: every ordered pair of ``gaits``."""
     backend: str = "auto"
@@ -157,7 +161,7 @@ def collect(
     entries = [load_entry(Path(library), name) for name in gaits]
     latent_dim, action = _common_policy_shape(entries)
     backend_name = resolve_backend_name(cfg.backend)
-    pushes = PushConfig(max_force=cfg.push_max)
+    pushes = PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s)
     settings = {
         "horizon_s": cfg.horizon_s,
         "warmup_s": cfg.warmup_s,
@@ -165,7 +169,7 @@ def collect(
         "push_max_n": cfg.push_max,
         "push_duration_s": list(pushes.duration),
         "push_interval_s": list(pushes.interval),
-        "pushes_during": "whole cycle (warm-up, source, horizon); push_force: largest during the horizon",
+        "pushes_during": "source run only (none starts after the switch); push_force: largest of the source run",
         "pairs": [list(p) for p in pairs],
         "pair_choice": "least-sampled ordered pair at each reset, ties at random; phase_dest uniform in [0, 1)",
         "chain": cfg.chain,
@@ -324,7 +328,7 @@ class _Run:
         fell = dones & ~extras["time_outs"]
         self._steps_left -= 1
         push = obs["privileged"][:, _PUSH_COLUMNS].norm(dim=1) * _PUSH_UNIT
-        self._max_push = torch.where(self._in_horizon, torch.maximum(self._max_push, push), self._max_push)
+        self._max_push = torch.where(self._in_horizon, self._max_push, torch.maximum(self._max_push, push))
         finished = self._in_horizon & (fell | (self._steps_left <= 0))
         source_fell = ~self._in_horizon & fell
         due = ~self._in_horizon & ~fell & (self._steps_left <= 0)
@@ -368,6 +372,8 @@ class _Run:
         if new_pair:
             self._pair[ids] = self._least_sampled(k).to(self._dev)
         self.env.reset_worlds(ids, gait=self._pair_source[self._pair[ids]])
+        self.env.enable_pushes(ids, True)
+        self._max_push[ids] = 0.0
         self._in_horizon[ids] = False
         extra = torch.randint(self._extra + 1, (k,), generator=self._gen).to(self._dev)
         self._steps_left[ids] = self._warmup + extra
@@ -386,6 +392,8 @@ class _Run:
         ids, best = ids[ok.to(ids.device)], best[ok]
         self._pair[ids] = best.to(self._dev)
         self._load += torch.bincount(best, minlength=len(self._load))
+        self.env.enable_pushes(ids, True)
+        self._max_push[ids] = 0.0
         self._in_horizon[ids] = False
         self._steps_left[ids] = torch.randint(self._extra + 1, (len(ids),), generator=self._gen).to(self._dev)
         return chosen.to(self._dev)
@@ -411,11 +419,11 @@ class _Run:
         dest = self._pair_dest[self._pair[ids]]
         phase = torch.rand(len(ids), generator=self._gen).to(self._dev)
         env.switch(ids, dest, phase)
+        env.enable_pushes(ids, False)
         self._phase_dest[ids] = phase
         self._value_dest[ids] = self._per_gait(dest, "value", env.get_observations()[ids])
         self._in_horizon[ids] = True
         self._steps_left[ids] = self._horizon
-        self._max_push[ids] = 0.0
 
     def _finish(self, ids: torch.Tensor, alive: torch.Tensor) -> None:
         def rows(t: torch.Tensor) -> np.ndarray:

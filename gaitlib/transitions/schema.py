@@ -84,7 +84,7 @@ COLUMNS: dict[str, Column] = {
     "explicit": Column("float32", "explicit", "mixed", "source's explicit state at the switch (explicit_layout)"),
     "value_source": Column("float32", None, "1", "source critic value before the switch"),
     "value_dest": Column("float32", None, "1", "destination critic value on the observation right after the switch"),
-    "push_force": Column("float32", None, "N", "largest push magnitude applied during the horizon (0: none)"),
+    "push_force": Column("float32", None, "N", "largest push magnitude during the source run before the switch (0: none)"),
     "success": Column("uint8", None, "1", "alpha: 1 if no termination within the horizon after the switch"),
     "switch_time": Column("float32", None, "s", "time of the switch since the world's episode start"),
     "world": Column("int32", None, "index", "world that produced the sample"),

@@ -1,0 +1,177 @@
+"""The meta-controller (paper Algorithm 1): every control step (30 Hz) the active policy of each world acts; a
+world with a queued policy asks the strategy whether to switch now and at which destination phase, and switches
+when it says so, or when the request has waited ``deadline_s`` (forced, at the strategy's best candidate).
+
+Works on any :class:`~gaitlib.envs.ImitationEnv` (any backend, any number of worlds) whose gaits are the library
+policies given, in the same order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gaitlib.envs import ImitationEnv
+from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
+from gaitlib.training.policy import GaitPolicy
+
+__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchEvent"]
+
+DEADLINE_S = 2.0
+"""A request not acted on within this time is forced, s."""
+
+
+@dataclass(frozen=True)
+class SwitchEvent:
+    """One switch made by the meta-controller."""
+
+    world: int
+    step: int
+    """Controller step at which the switch happened (counted from the controller's creation)."""
+    source: int
+    dest: int
+    phase: float
+    """Destination phase switched to, cycles."""
+    score: float
+    """The strategy's score of that phase (NaN for ``random``)."""
+    forced: bool
+    """True when the deadline, not the strategy, made the switch."""
+    wait_s: float
+    """Time from the request to the switch, s."""
+
+
+@dataclass(frozen=True)
+class MetaStep:
+    """What one controller step did."""
+
+    actions: torch.Tensor
+    """(N, 12) actions applied, each from its world's active policy (after this step's switches)."""
+    fell: torch.Tensor
+    """(N,) bool: the world terminated (the environment has reset it; its request is dropped)."""
+    events: list[SwitchEvent]
+    """Switches made at this step."""
+    waiting: torch.Tensor
+    """(N,) bool: worlds that had a queued policy at this step (before switching)."""
+    best_score: torch.Tensor
+    """(N,) the strategy's best candidate score of waiting worlds this step (NaN elsewhere)."""
+    best_phase: torch.Tensor
+    """(N,) the best candidate destination phase of waiting worlds this step (NaN elsewhere)."""
+
+
+class MetaController:
+    """An active and a queued policy per world, switched by a strategy (paper Algorithm 1)."""
+
+    def __init__(
+        self,
+        env: ImitationEnv,
+        policies: list[GaitPolicy],
+        strategy: Strategy,
+        *,
+        typical_value: torch.Tensor | None = None,
+        deadline_s: float = DEADLINE_S,
+        candidates: int | None = None,
+    ) -> None:
+        """``policies[g]`` drives ``env``'s gait g. ``typical_value`` (G,) divides destination critic values for
+        strategies that need values (required by them)."""
+        if len(policies) != len(env.clips):
+            raise ValueError(f"{len(policies)} policies for an environment of {len(env.clips)} gaits")
+        if strategy.needs_value and typical_value is None:
+            raise ValueError(f"strategy '{strategy.name}' needs the gaits' typical values")
+        self.env = env
+        self.policies = policies
+        self.strategy = strategy
+        self.deadline_steps = max(0, round(deadline_s / env.dt))
+        self.candidates = phase_grid(candidates, env.device) if candidates else phase_grid(device=env.device)
+        self.typical_value = None if typical_value is None else torch.as_tensor(typical_value, device=env.device)
+        n = env.num_envs
+        self.queued = torch.full((n,), -1, dtype=torch.long, device=env.device)
+        """(N,) the queued gait of each world, -1 for none."""
+        self.waited = torch.zeros(n, dtype=torch.long, device=env.device)
+        """(N,) control steps each queued request has waited."""
+        self.steps = 0
+
+    @property
+    def active(self) -> torch.Tensor:
+        """(N,) the gait each world's active policy drives."""
+        return self.env.gait
+
+    def request(self, world_ids: torch.Tensor, gait: torch.Tensor | int) -> None:
+        """Queue ``gait`` for worlds ``world_ids`` (replacing any queued one); the wait starts now."""
+        world_ids = torch.as_tensor(world_ids, device=self.env.device).reshape(-1)
+        self.queued[world_ids] = torch.as_tensor(gait, device=self.env.device)
+        self.waited[world_ids] = 0
+
+    def cancel(self, world_ids: torch.Tensor) -> None:
+        """Drop the queued requests of ``world_ids``."""
+        self.queued[world_ids] = -1
+
+    def step(self) -> MetaStep:
+        """Decide the switches of waiting worlds, act with every world's active policy, step the environment."""
+        env = self.env
+        n = env.num_envs
+        best_score = torch.full((n,), float("nan"), device=env.device)
+        best_phase = torch.full((n,), float("nan"), device=env.device)
+        waiting = (self.queued >= 0) & (self.queued != env.gait)
+        self.queued[(self.queued >= 0) & ~waiting] = -1  # a request for the active gait is already met
+        events: list[SwitchEvent] = []
+        ids = waiting.nonzero().squeeze(1)
+        if len(ids):
+            decision, query = self._decide(ids)
+            best_score[ids], best_phase[ids] = decision.score, decision.phase
+            forced = self.waited[ids] >= self.deadline_steps
+            go = decision.switch | forced
+            if go.any():
+                chosen = ids[go]
+                env.switch(chosen, self.queued[chosen], decision.phase[go])
+                for i, world in zip(go.nonzero().squeeze(1).tolist(), chosen.tolist(), strict=True):
+                    events.append(
+                        SwitchEvent(
+                            world=world,
+                            step=self.steps,
+                            source=int(query.source[i]),
+                            dest=int(query.dest[i]),
+                            phase=float(decision.phase[i]),
+                            score=float(decision.score[i]),
+                            forced=bool(forced[i] & ~decision.switch[i]),
+                            wait_s=float(self.waited[world]) * env.dt,
+                        )
+                    )
+                self.queued[chosen] = -1
+        actions = self._per_gait(env.gait, "act", env.get_observations())
+        _, _, dones, extras = env.step(actions)
+        fell = dones & ~extras["time_outs"]
+        self.queued[dones] = -1
+        self.waited[self.queued >= 0] += 1
+        self.steps += 1
+        return MetaStep(actions, fell, events, waiting, best_score, best_phase)
+
+    def _decide(self, ids: torch.Tensor):
+        env = self.env
+        obs = env.get_observations()[ids]
+        source, dest = env.gait[ids], self.queued[ids]
+        query = SwitchQuery(
+            source=source,
+            dest=dest,
+            phase_source=env.phase[ids],
+            latent=self._per_gait(source, "latent", obs),
+            candidates=self.candidates,
+        )
+        if self.strategy.needs_value:
+            c = len(self.candidates)
+            preview = env.preview_switch(ids, dest, self.candidates)
+            values = self._per_gait(dest.repeat_interleave(c), "value", preview).reshape(len(ids), c)
+            query.dest_value = values / self.typical_value[dest].unsqueeze(1)
+        return self.strategy.decide(query), query
+
+    def _per_gait(self, gait: torch.Tensor, method: str, obs) -> torch.Tensor:
+        """``policy.method(rows)`` of each row's gait (one call per gait present)."""
+        out = None
+        for g in torch.unique(gait).tolist():
+            rows = (gait == g).nonzero().squeeze(1)
+            values = getattr(self.policies[g], method)(obs[rows])
+            if out is None:
+                out = torch.empty((len(gait), *values.shape[1:]), dtype=values.dtype, device=values.device)
+            out[rows] = values
+        assert out is not None
+        return out

@@ -1,0 +1,104 @@
+"""Switching strategies behind one interface (:class:`Strategy`), a small registry, and what they are built from.
+
+Built-in: ``random``, ``value``, ``tmt``, ``tmt-value`` and ``net`` (design brief section 7). A strategy factory
+takes the :class:`SwitchResources` of a library (its TMT and transition-net, loaded only when a strategy asks);
+:func:`register_strategy` adds one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gaitlib.errors import TransitionDataError, UnknownNameError
+from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
+from gaitlib.strategies.net import NET_THRESHOLD, NetStrategy
+from gaitlib.strategies.random_switch import RandomStrategy
+from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, TransitionTable, build_table, load_table, save_table
+from gaitlib.strategies.value import ValueStrategy
+
+__all__ = [
+    "NET_THRESHOLD",
+    "PHASE_GRID",
+    "Decision",
+    "Strategy",
+    "SwitchQuery",
+    "SwitchResources",
+    "TransitionTable",
+    "build_table",
+    "get_strategy",
+    "load_table",
+    "phase_grid",
+    "register_strategy",
+    "save_table",
+    "strategy_names",
+]
+
+
+@dataclass
+class SwitchResources:
+    """Where strategies get their data: a library folder and its gaits, with the TMT and net loaded on demand."""
+
+    library: Path
+    """Library folder (holds ``transition_net/net.pt`` and ``tmt/tmt.json``)."""
+    identities: dict[str, str]
+    """Gait name -> library identity of the policies in use."""
+    gaits: tuple[str, ...]
+    """Gait order of the environment the strategies will serve (indices in queries follow it)."""
+    seed: int = 0
+    """Seed of random choices."""
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def table(self) -> TransitionTable:
+        """The library's TMT (with typical values and calibrated thresholds)."""
+        if "table" not in self._cache:
+            table = load_table(self.library / "tmt" / "tmt.json", identities=self.identities)
+            self._check_gaits("TMT", table.gaits)
+            self._cache["table"] = table
+        return self._cache["table"]
+
+    @property
+    def net(self):
+        """The library's transition-net (:class:`~gaitlib.transition_net.TransitionNet`, eval mode)."""
+        if "net" not in self._cache:
+            from gaitlib.transition_net import load_net
+
+            saved = load_net(self.library / "transition_net" / "net.pt", identities=self.identities)
+            self._check_gaits("transition-net", saved.net.spec.gaits)
+            self._cache["net"] = saved.net
+        return self._cache["net"]
+
+    def _check_gaits(self, what: str, gaits: tuple[str, ...]) -> None:
+        if tuple(gaits) != tuple(self.gaits):
+            raise TransitionDataError(
+                f"the {what} was fitted for gaits {list(gaits)}, not {list(self.gaits)}; collect and fit again"
+            )
+
+
+StrategyFactory = Callable[[SwitchResources], Strategy]
+_REGISTRY: dict[str, StrategyFactory] = {
+    "random": lambda r: RandomStrategy(seed=r.seed),
+    "value": lambda r: ValueStrategy(threshold=r.table.thresholds["value"]),
+    "tmt": lambda r: TMTStrategy(r.table),
+    "tmt-value": lambda r: TMTValueStrategy(r.table),
+    "net": lambda r: NetStrategy(r.net),
+}
+
+
+def register_strategy(name: str, factory: StrategyFactory) -> None:
+    """Add (or replace) the strategy ``name``, built by ``factory(resources)``."""
+    _REGISTRY[name] = factory
+
+
+def strategy_names() -> list[str]:
+    """Registered strategy names, in registration order."""
+    return list(_REGISTRY)
+
+
+def get_strategy(name: str, resources: SwitchResources) -> Strategy:
+    """Build strategy ``name`` from ``resources``; :class:`UnknownNameError` for an unknown name."""
+    if name not in _REGISTRY:
+        raise UnknownNameError("strategy", name, strategy_names())
+    return _REGISTRY[name](resources)

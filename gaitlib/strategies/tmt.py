@@ -1,0 +1,243 @@
+"""The transition-matrix table (TMT, Soeseno et al. 2021) and the calibration of the data-driven thresholds.
+
+The TMT counts collected switch outcomes by (m, n, source phase bin, destination phase bin); a cell's score is its
+alive rate with a uniform prior, (successes + 1) / (samples + 2), so an empty cell scores 0.5. (The published TMT
+also scores duration, effort and control accuracy; gaitlib's keeps the alive rate only, the quantity switching is
+judged on.) Beside it the table keeps what the ``value`` strategies need: each gait's typical on-gait critic value
+(the mean source critic value of the samples starting from that gait), by which destination values are divided.
+
+Thresholds of ``value``, ``tmt`` and ``tmt-value`` are calibrated per ordered pair on the same data: each sample is
+scored as the strategy would score its (state, phi_n), and the threshold is the one that best separates successes
+from failures (largest balanced accuracy). The table is written to ``library/tmt/tmt.json`` and, like the
+transition-net, refused at load time when the library's policies are not the ones it was built for.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gaitlib.errors import TransitionDataError
+from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
+from gaitlib.transitions.schema import TransitionData
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "TMTStrategy",
+    "TMTValueStrategy",
+    "TransitionTable",
+    "best_threshold",
+    "build_table",
+    "load_table",
+    "save_table",
+]
+
+FORMAT_NAME = "gaitlib.tmt"
+FORMAT_VERSION = 1
+CALIBRATED = ("value", "tmt", "tmt-value")
+"""Strategies whose thresholds the table holds."""
+
+
+@dataclass
+class TransitionTable:
+    """Switch outcomes by pair and phase bins, typical values, and calibrated thresholds."""
+
+    gaits: tuple[str, ...]
+    """Gait names; indices in ``successes``/``counts`` follow this order."""
+    identities: dict[str, str]
+    """Library identity (SHA-256) of each gait's policy."""
+    successes: np.ndarray
+    """(G, G, B, B) successful switches by m, n, source phase bin, destination phase bin."""
+    counts: np.ndarray
+    """(G, G, B, B) switches in each cell."""
+    typical_value: np.ndarray
+    """(G,) mean critic value of each gait while it runs on-gait (before a switch)."""
+    thresholds: dict[str, dict[tuple[int, int], float]]
+    """Strategy name -> (m, n) -> threshold, for the strategies of :data:`CALIBRATED`."""
+    info: dict
+    """Where the table came from: data file, samples, calibration rule."""
+
+    @property
+    def bins(self) -> int:
+        """B: phase bins per cycle."""
+        return self.counts.shape[-1]
+
+    def alive_rate(self, source: np.ndarray, dest: np.ndarray, bin_source: np.ndarray, bin_dest: np.ndarray):
+        """Smoothed alive rate of the given cells (numpy index arrays of one broadcast shape)."""
+        ok = self.successes[source, dest, bin_source, bin_dest]
+        n = self.counts[source, dest, bin_source, bin_dest]
+        return (ok + 1.0) / (n + 2.0)
+
+    def phase_bin(self, phase: np.ndarray) -> np.ndarray:
+        """Bin index of phases in cycles."""
+        return np.clip((np.asarray(phase) % 1.0 * self.bins).astype(np.int64), 0, self.bins - 1)
+
+
+def best_threshold(scores: np.ndarray, labels: np.ndarray) -> float:
+    """The threshold t maximizing balanced accuracy of "success iff score >= t" (-inf when every label is a
+    success, +inf when none is)."""
+    labels = np.asarray(labels).astype(bool)
+    if labels.all():
+        return float("-inf")
+    if not labels.any():
+        return float("inf")
+    order = np.argsort(-scores, kind="stable")
+    s, y = scores[order], labels[order]
+    tpr = np.cumsum(y) / y.sum()  # predicting success for the top i+1 scores
+    fpr = np.cumsum(~y) / (~y).sum()
+    last = np.r_[s[1:] != s[:-1], True]  # only cut between distinct scores
+    balanced = np.where(last, (tpr + 1.0 - fpr) / 2.0, -1.0)
+    return float(s[int(np.argmax(balanced))])
+
+
+def sample_scores(table: TransitionTable, data: TransitionData) -> dict[str, np.ndarray]:
+    """The score each calibrated strategy gives each stored sample's (state, phi_n)."""
+    x = data.samples
+    value = x.value_dest / table.typical_value[x.dest]
+    tmt = table.alive_rate(x.source, x.dest, table.phase_bin(x.phase_source), table.phase_bin(x.phase_dest))
+    return {"value": value, "tmt": tmt, "tmt-value": tmt * value}
+
+
+def build_table(data: TransitionData, *, identities: dict[str, str], bins: int = PHASE_GRID) -> TransitionTable:
+    """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds."""
+    x, gaits = data.samples, tuple(data.header.gaits)
+    g = len(gaits)
+    if len(x) == 0:
+        raise TransitionDataError("no transition samples to build a TMT from")
+    table = TransitionTable(
+        gaits=gaits,
+        identities=dict(identities),
+        successes=np.zeros((g, g, bins, bins), dtype=np.int64),
+        counts=np.zeros((g, g, bins, bins), dtype=np.int64),
+        typical_value=np.ones(g),
+        thresholds={},
+        info={},
+    )
+    cell = (x.source, x.dest, table.phase_bin(x.phase_source), table.phase_bin(x.phase_dest))
+    np.add.at(table.successes, cell, x.success.astype(np.int64))
+    np.add.at(table.counts, cell, 1)
+    for i in range(g):
+        values = x.value_source[x.source == i]
+        table.typical_value[i] = float(values.mean()) if len(values) else 1.0
+    scores = sample_scores(table, data)
+    pairs = sorted(set(zip(x.source.tolist(), x.dest.tolist(), strict=True)))
+    for name in CALIBRATED:
+        table.thresholds[name] = {}
+        for m, n in pairs:
+            rows = (x.source == m) & (x.dest == n)
+            table.thresholds[name][(m, n)] = best_threshold(scores[name][rows], x.success[rows])
+    table.info = {
+        "data": str(data.info.path),
+        "samples": int(len(x)),
+        "bins": bins,
+        "score": "alive rate (successes + 1) / (samples + 2) per cell",
+        "calibration": "per ordered pair, the threshold of largest balanced accuracy on the same data",
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    return table
+
+
+def save_table(path: Path, table: TransitionTable) -> Path:
+    """Write ``table`` as JSON (a temporary file beside ``path``, then renamed over it)."""
+    path = Path(path)
+    g = table.gaits
+    payload = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "gaits": list(g),
+        "library_identities": table.identities,
+        "successes": table.successes.tolist(),
+        "counts": table.counts.tolist(),
+        "typical_value": table.typical_value.tolist(),
+        "thresholds": {
+            name: {f"{g[m]}-{g[n]}": t for (m, n), t in per_pair.items()} for name, per_pair in table.thresholds.items()
+        },
+        "info": table.info,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as handle:
+            json.dump(payload, handle)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:
+    """Read the TMT at ``path`` for the current library (gait name -> identity); one-line errors when it is
+    missing, foreign, of another version, or built for other policies."""
+    path = Path(path)
+    if not path.is_file():
+        raise TransitionDataError(f"no TMT at {path} (run gaitlib fit)")
+    try:
+        payload = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise TransitionDataError(f"{path} is not a readable TMT ({type(error).__name__})") from error
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
+        raise TransitionDataError(f"{path} is not a gaitlib TMT")
+    if payload.get("format_version") != FORMAT_VERSION:
+        raise TransitionDataError(
+            f"TMT {path} has format version {payload.get('format_version')}; this gaitlib reads {FORMAT_VERSION}"
+        )
+    for gait, identity in payload["library_identities"].items():
+        if identities.get(gait) != identity:
+            raise TransitionDataError(
+                f"TMT {path} was built for another '{gait}' policy than the library's; collect and fit again"
+            )
+    gaits = tuple(payload["gaits"])
+    index = {name: i for i, name in enumerate(gaits)}
+
+    def pair(text: str) -> tuple[int, int]:
+        m, n = text.split("-", 1)
+        return index[m], index[n]
+
+    return TransitionTable(
+        gaits=gaits,
+        identities=payload["library_identities"],
+        successes=np.asarray(payload["successes"], dtype=np.int64),
+        counts=np.asarray(payload["counts"], dtype=np.int64),
+        typical_value=np.asarray(payload["typical_value"], dtype=np.float64),
+        thresholds={name: {pair(p): float(t) for p, t in per.items()} for name, per in payload["thresholds"].items()},
+        info=payload["info"],
+    )
+
+
+class TMTStrategy(Strategy):
+    """At the current source phase, the destination phase bin with the best alive rate in the TMT."""
+
+    name = "tmt"
+
+    def __init__(self, table: TransitionTable) -> None:
+        super().__init__(threshold=table.thresholds[self.name])
+        self.table = table
+
+    def scores(self, query: SwitchQuery) -> torch.Tensor:
+        t = self.table
+        source, dest = query.source.cpu().numpy()[:, None], query.dest.cpu().numpy()[:, None]
+        bin_source = t.phase_bin(query.phase_source.cpu().numpy())[:, None]
+        bin_dest = t.phase_bin(query.candidates.cpu().numpy())[None, :]
+        rate = t.alive_rate(source, dest, bin_source, bin_dest)
+        return torch.as_tensor(rate, dtype=torch.float32, device=query.source.device)
+
+
+class TMTValueStrategy(TMTStrategy):
+    """The TMT alive rate times the destination critic's normalized value of each candidate."""
+
+    name = "tmt-value"
+    needs_value = True
+
+    def scores(self, query: SwitchQuery) -> torch.Tensor:
+        assert query.dest_value is not None
+        return super().scores(query) * query.dest_value
