@@ -10,7 +10,7 @@ import sys
 import h5py
 import pytest
 
-from gaitlib.cli.transitions import _parse_pairs
+from gaitlib.cli.options import parse_pairs
 from gaitlib.gaits import get_gait
 from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
@@ -47,9 +47,9 @@ def library(tmp_path_factory):
 
 def test_pairs_accept_ordered_pairs_and_whole_gaits() -> None:
     gaits = ["pace", "stand", "trot"]
-    assert _parse_pairs("trot-stand,pace-stand", gaits) == (("trot", "stand"), ("pace", "stand"))
-    assert set(_parse_pairs("trot", gaits)) == {("trot", "pace"), ("trot", "stand"), ("pace", "trot"), ("stand", "trot")}
-    assert _parse_pairs(None, gaits) is None
+    assert parse_pairs("trot-stand,pace-stand", gaits) == (("trot", "stand"), ("pace", "stand"))
+    assert set(parse_pairs("trot", gaits)) == {("trot", "pace"), ("trot", "stand"), ("pace", "trot"), ("stand", "trot")}
+    assert parse_pairs(None, gaits) is None
 
 
 def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
@@ -62,11 +62,14 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert resumed.returncode == 0, resumed.stderr
     assert validate(data).count == 32 and "16 new" in resumed.stderr
 
-    fitted = gaitlib("fit", "--data", data, "--epochs", "3", "--library", lib, "--json")
+    more = str(tmp_path / "more.h5")  # a second file (as after growing the library): fitted together
+    assert gaitlib("collect", "--samples", "16", "--out", more, "--library", lib, "--seed", "1", *QUICK).returncode == 0
+    fitted = gaitlib("fit", "--data", data, "--data", more, "--epochs", "3", "--library", lib, "--json")
     assert fitted.returncode == 0, fitted.stderr
     report = json.loads(fitted.stdout)
-    assert set(report["balanced_validation_accuracy"]) == {"latent"}
-    assert (library / "transition_net" / "net.pt").is_file()
+    assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48
+    assert 0 < report["balanced_samples"]["latent"] <= 48
+    assert (library / "transition_net" / "net.pt").is_file() and (library / "tmt" / "tmt.json").is_file()
     assert json.loads((library / "transition_net" / "accuracy.json").read_text()) == report
 
     scored = gaitlib("fit", "--evaluate", "--data", data, "--library", lib, "--json")

@@ -163,3 +163,47 @@ def test_switch_reanchors_the_reference_at_the_chosen_phase(clips) -> None:
     assert torch.allclose(ref.joint_pos[1], clips["pace"].frame(torch.tensor([0.25])).joint_pos[0], atol=1e-5)
     env.step(torch.zeros(2, 12))
     assert env.phase[1].item() == pytest.approx(0.25 + env.dt * clips["pace"].phase_rate, abs=1e-5)
+
+
+def test_disabled_pushes_let_a_push_under_way_run_out_and_start_no_other() -> None:
+    schedule = PushSchedule(
+        PushConfig(max_force=100.0, fixed_force=True, duration=(0.3, 0.3), interval=(0.2, 0.2)),
+        2,
+        1 / 30,
+        torch.Generator().manual_seed(0),
+    )
+    for _ in range(8):  # quiet for 6 steps, then pushing
+        schedule.advance()
+    assert torch.all(schedule.force.norm(dim=1) > 0)
+    schedule.enable(torch.tensor([0]), False)
+    forces = []
+    for _ in range(60):
+        schedule.advance()
+        forces.append(schedule.force.norm(dim=1))
+    forces = torch.stack(forces)
+    assert forces[0, 0] > 0  # the push under way goes on ...
+    assert torch.all(forces[8:, 0] == 0)  # ... until its 0.3 s are over; none starts after it
+    assert (forces[:, 1] > 0).sum() > 20  # world 1 is still pushed now and then
+    schedule.enable(torch.tensor([0]), True)
+    for _ in range(10):
+        schedule.advance()
+    assert schedule.force[0].norm() > 0
+
+
+def test_preview_switch_shows_the_observations_a_switch_would_give_and_changes_nothing(clips) -> None:
+    env = make_env(clips, names=("trot", "pace"), n=3, randomization=RandomizationConfig(enabled=False))
+    for _ in range(5):
+        env.step(torch.zeros(3, 12))
+    before = env.get_observations().clone()
+    phase_before, gait_before = env.phase.clone(), env.gait.clone()
+    candidates = torch.tensor([0.1, 0.6])
+    ids = torch.tensor([0, 2])
+    preview = env.preview_switch(ids, torch.tensor([1, 1]), candidates)
+    assert preview.batch_size == torch.Size([4])
+    assert torch.equal(env.get_observations()["policy"], before["policy"])
+    assert torch.equal(env.phase, phase_before) and torch.equal(env.gait, gait_before)
+    env.switch(torch.tensor([2]), torch.tensor([1]), torch.tensor([0.6]))
+    after = env.get_observations()
+    for key in ("policy", "privileged"):  # world 2 at the second candidate: rows are world-major
+        assert torch.allclose(preview[key][3], after[key][2], atol=1e-5)
+    assert not torch.allclose(preview["policy"][2], preview["policy"][3])

@@ -15,8 +15,8 @@ from gaitlib.errors import GaitError, UnknownNameError
 from gaitlib.gaits import (
     clip_from_description,
     contact_schedule,
-    forward_kinematics,
     foot_trajectory,
+    forward_kinematics,
     gait_names,
     get_gait,
     inverse_kinematics,
@@ -25,9 +25,9 @@ from gaitlib.gaits import (
     load_gait_file,
     load_motion_file,
     register_gait,
+    registry,
     save_motion_file,
 )
-from gaitlib.gaits import registry
 from gaitlib.robots.a1 import constants as c
 
 FR, FL, RR, RL = range(4)

@@ -7,9 +7,9 @@ import dataclasses
 import pytest
 import torch
 
+import gaitlib.sim
 from gaitlib.errors import SimulationError, UnknownNameError
 from gaitlib.robots import get_robot
-import gaitlib.sim
 from gaitlib.sim import make_backend
 
 

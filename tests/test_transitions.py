@@ -14,7 +14,7 @@ from gaitlib.errors import TransitionDataError
 from gaitlib.gaits import get_gait
 from gaitlib.training import get_preset, load_entry
 from gaitlib.training.trainer import TrainRequest, train_gait
-from gaitlib.transitions import CollectConfig, collect, explicit_state, read, schema, validate
+from gaitlib.transitions import CollectConfig, collect, explicit_state, read, read_all, schema, validate
 from gaitlib.transitions.schema import COLUMNS, TransitionBatch, TransitionHeader
 
 TINY = dataclasses.replace(
@@ -242,3 +242,46 @@ def test_pushes_are_recorded_and_pairs_can_be_restricted(library, tmp_path) -> N
     s = read(tmp_path / "p.h5").samples
     assert np.all(s.source == 1) and np.all(s.dest == 0)
     assert np.all((s.push_force >= 0) & (s.push_force <= 300.0 + 1e-3)) and s.push_force.max() > 0
+
+
+def test_files_of_a_grown_library_are_read_as_one(tmp_path) -> None:
+    def write(path, gaits, identities, batch):
+        schema.create(path, gaits=gaits, identities=identities, latent_dim=4, settings={"file": path.name})
+        with schema.open_for_append(path, expect=TransitionHeader(
+            gaits=tuple(gaits), identities=tuple(identities), latent_dim=4, settings={"file": path.name}
+        )) as target:
+            schema.append(target.file, batch)
+
+    old = synthetic(10)  # stand (0) <-> trot (1)
+    write(tmp_path / "old.h5", ["stand", "trot"], ["s" * 64, "t" * 64], old)
+    new = synthetic(6, seed=1)  # bound (0) <-> trot (1), collected after bound was added
+    write(tmp_path / "new.h5", ["bound", "trot"], ["b" * 64, "t" * 64], new)
+    merged = read_all([tmp_path / "old.h5", tmp_path / "new.h5"])
+    assert merged.header.gaits == ("bound", "stand", "trot")
+    assert merged.header.identities == ("b" * 64, "s" * 64, "t" * 64)
+    s = merged.samples
+    assert len(s) == 16 and merged.info.count == 16
+    np.testing.assert_array_equal(s.source[:10], np.where(old.source == 0, 1, 2))
+    np.testing.assert_array_equal(s.source[10:], np.where(new.source == 0, 0, 2))
+    np.testing.assert_array_equal(s.latent[10:], new.latent.astype(np.float32))
+    write(tmp_path / "other.h5", ["stand", "trot"], ["s" * 64, "x" * 64], synthetic(4))
+    with pytest.raises(TransitionDataError, match="another 'trot' policy"):
+        read_all([tmp_path / "old.h5", tmp_path / "other.h5"])
+
+
+def test_a_success_chains_into_the_next_sample_without_a_reset(interrupted) -> None:
+    path = interrupted[0]
+    s = read(path).samples
+    assert validate(path).header.settings["chain"] is True
+    second = s.select(s.chunk >= 1)  # one collection run: worlds are not restarted in between
+    chained = after_failure = 0
+    for world in np.unique(second.world):
+        rows = second.select(second.world == world)
+        for prev, cur in zip(range(len(rows) - 1), range(1, len(rows))):
+            if rows.success[prev] and rows.switch_time[cur] > rows.switch_time[prev]:  # no reset in between:
+                assert rows.source[cur] == rows.dest[prev]  # the destination went on and became the next source
+                chained += 1
+            elif not rows.success[prev]:  # a fall resets the world: a warm-up and a source run, nothing more
+                assert rows.switch_time[cur] <= QUICK.warmup_s + QUICK.source_extra_s + 1e-4
+                after_failure += 1
+    assert chained > 0 and after_failure > 0

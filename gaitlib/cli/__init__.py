@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import typer
 
-from gaitlib.cli import bench, train, transitions
+from gaitlib.cli import bench, switching, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -22,11 +23,14 @@ app.command("train")(train.train_command)
 app.command("eval")(train.eval_command)
 app.command("collect")(transitions.collect_command)
 app.command("fit")(transitions.fit_command)
+app.command("benchmark")(switching.benchmark_command)
+app.command("run")(switching.run_command)
 app.add_typer(bench.app, name="bench")
 
 
 def main() -> None:
     """Console entry point: run the app, turning gaitlib errors, OS errors and Ctrl-C into one line on stderr."""
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops a long job as Ctrl-C does: finished work is kept
     try:
         code = app(standalone_mode=False)  # typer turns Ctrl-C inside a command into exit code 130
     except GaitlibError as error:
@@ -48,5 +52,11 @@ def main() -> None:
         print(f"gaitlib: error: {error.strerror or error}{where}", file=sys.stderr)
         sys.exit(1)
     if code == 130:
-        print("gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr)
+        print(
+            "gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr
+        )
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt

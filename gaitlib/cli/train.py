@@ -25,7 +25,9 @@ def _description(gait: str, gait_file: Path | None):
 
 
 def train_command(
-    gait: str = typer.Argument(..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."),
+    gait: str = typer.Argument(
+        ..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."
+    ),
     preset: str = typer.Option("cpu", "--preset", help="cpu (tuned for a 2-core CPU) or paper (Table 2)."),
     iterations: int | None = typer.Option(None, "--iterations", help="PPO iterations (default: the preset's)."),
     minutes: float | None = typer.Option(None, "--minutes", help="Stop after this much training time, min."),
@@ -73,7 +75,9 @@ def train_command(
             progress.update(task, completed=stats.iteration, status=status)
             if not console.is_terminal and stats.elapsed - last_line[0] >= 30.0:  # logs get a line every 30 s
                 last_line[0] = stats.elapsed
-                console.print(f"iteration {stats.iteration}/{stats.total} {stats.elapsed:7.0f}s  {status}", soft_wrap=True)
+                console.print(
+                    f"iteration {stats.iteration}/{stats.total} {stats.elapsed:7.0f}s  {status}", soft_wrap=True
+                )
 
         result = train_gait(request, on_iteration=show)
     e = result.evaluation
@@ -116,7 +120,9 @@ def eval_command(
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N")
+    table = Table(
+        title=f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N"
+    )
     table.add_column("metric")
     table.add_column("value", justify="right")
     table.add_row("fall rate", f"{result.fall_rate:.3f}")

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import typer
@@ -19,20 +17,6 @@ PAPER_TABLE_3 = {
     "latent": (87.14, 86.97, 82.45, 78.68, 78.3, 75.49),
 }
 """Paper Table 3: balanced validation accuracy (%) per input kind, 5500 samples per pair."""
-
-
-def _parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ...] | None:
-    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it."""
-    if text is None:
-        return None
-    pairs: list[tuple[str, str]] = []
-    for item in (part.strip() for part in text.split(",") if part.strip()):
-        if "-" in item:
-            m, n = item.split("-", 1)
-            pairs.append((m, n))
-        else:
-            pairs += [(item, g) for g in gaits if g != item] + [(g, item) for g in gaits if g != item]
-    return tuple(dict.fromkeys(pairs))
 
 
 def collect_command(
@@ -53,6 +37,7 @@ def collect_command(
     from rich.console import Console
     from rich.markup import escape
 
+    from gaitlib.cli.options import parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir
     from gaitlib.training.library import entry_names
@@ -65,7 +50,7 @@ def collect_command(
         num_worlds=worlds,
         horizon_s=horizon,
         push_max=push_max,
-        pairs=_parse_pairs(pairs, names),
+        pairs=parse_pairs(pairs, names),
         backend=backend,
         seed=seed,
     )
@@ -92,7 +77,9 @@ def collect_command(
 
 
 def fit_command(
-    data: Path = typer.Option(Path("data/transitions.h5"), "--data", help="HDF5 transition samples."),
+    data: list[Path] = typer.Option(
+        [Path("data/transitions.h5")], "--data", help="HDF5 transition samples; repeat to fit on several files."
+    ),
     input_kind: str = typer.Option("latent", "--input", help="latent, phase or explicit."),
     epochs: int = typer.Option(100, "--epochs", help="Training epochs."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
@@ -101,10 +88,13 @@ def fit_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
-    """Fit the transition-net (balanced per pair, held-out balanced validation) and write it to the library."""
+    """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
+    thresholds, and write both to the library."""
+    from gaitlib.atomic import write_json
+    from gaitlib.strategies import build_table, save_table
     from gaitlib.training import default_library_dir, load_entry
     from gaitlib.transition_net import INPUT_KINDS, FitConfig, evaluate_net, fit, load_net, save_net
-    from gaitlib.transitions import read
+    from gaitlib.transitions import read_all
 
     library = library or default_library_dir()
     net_path = library / "transition_net" / "net.pt"
@@ -112,28 +102,34 @@ def fit_command(
         from gaitlib.errors import UnknownNameError
 
         raise UnknownNameError("input", input_kind, list(INPUT_KINDS))
-    samples = read(data)
+    samples = read_all(data)
+    sources = ", ".join(str(p) for p in data)
     if evaluate:
         gaits = samples.header.gaits
         saved = load_net(net_path, identities={g: load_entry(library, g).identity for g in gaits})
         accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, samples).items()}
-        _report({"input": saved.metadata["input"], "data": str(data), "accuracy": accuracy}, as_json)
+        _report({"input": saved.metadata["input"], "data": sources, "accuracy": accuracy}, as_json)
         return
     kinds = list(INPUT_KINDS) if ablation else [input_kind]
     results = {kind: fit(samples, FitConfig(kind=kind, epochs=epochs, seed=seed)) for kind in kinds}
     shipped = results.get("latent", results[kinds[0]])
     save_net(net_path, shipped)
+    identities = dict(zip(samples.header.gaits, samples.header.identities, strict=True))
+    tmt_path = save_table(library / "tmt" / "tmt.json", build_table(samples, identities=identities, source=sources))
     table = {
         kind: {f"{m}-{n}": a for (m, n), a in result.validation_accuracy.items()} for kind, result in results.items()
     }
     report = {
-        "data": str(data),
+        "data": sources,
         "samples": len(samples.samples),
+        "balanced_samples": {
+            kind: sum(2 * (t + v) for t, v in result.split.per_class.values()) for kind, result in results.items()
+        },
         "balanced_validation_accuracy": table,
         "paper_table_3": {kind: dict(zip(PAPER_PAIRS, row, strict=True)) for kind, row in PAPER_TABLE_3.items()},
-        "written": str(net_path),
+        "written": [str(net_path), str(tmt_path)],
     }
-    _write_json_atomically(net_path.with_name("accuracy.json"), report)
+    write_json(net_path.with_name("accuracy.json"), report)
     _report(report, as_json)
 
 
@@ -157,12 +153,3 @@ def _report(report: dict, as_json: bool) -> None:
             paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
             table.add_row(f"  paper {kind}", *(f"{paper[p]:.2f}" if p in paper else "-" for p in pairs))
     Console().print(table)
-
-
-def _write_json_atomically(path: Path, payload: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w") as handle:
-        json.dump(payload, handle, indent=2)
-        handle.write("\n")
-    os.replace(tmp, path)

@@ -47,15 +47,20 @@ class SwitchingSetup:
         )
         return ImitationEnv(sim, [e.clip for e in self.entries], cfg, seed=seed)
 
-    def controller(self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S) -> MetaController:
-        """A meta-controller over ``env`` (made by :meth:`make_env`) switching with strategy ``strategy``."""
-        chosen = get_strategy(strategy, self.resources)
-        typical = torch.as_tensor(self.resources.table.typical_value, dtype=torch.float32) if chosen.needs_value else None
+    def controller(
+        self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0
+    ) -> MetaController:
+        """A meta-controller over ``env`` (made by :meth:`make_env`) switching with strategy ``strategy`` (``seed``:
+        its random choices)."""
+        chosen = get_strategy(strategy, dataclasses.replace(self.resources, seed=seed))
+        typical = (
+            torch.as_tensor(self.resources.table.typical_value, dtype=torch.float32) if chosen.needs_value else None
+        )
         policies = [e.policy.to(env.device) for e in self.entries]
         return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s)
 
 
-def load_switching(library: Path, *, seed: int = 0) -> SwitchingSetup:
+def load_switching(library: Path) -> SwitchingSetup:
     """Load every entry of ``library`` (gaits in name order, as collections store them) for switching."""
     library = Path(library)
     names = entry_names(library)
@@ -65,7 +70,5 @@ def load_switching(library: Path, *, seed: int = 0) -> SwitchingSetup:
     scales = {(e.action_scale, float(e.metadata["action"]["clip"])) for e in entries}
     if len(scales) != 1:
         raise GaitlibError(f"library {library} mixes action scales/clips {sorted(scales)}; retrain its gaits alike")
-    resources = SwitchResources(
-        library=library, identities={e.name: e.identity for e in entries}, gaits=tuple(names), seed=seed
-    )
+    resources = SwitchResources(library=library, identities={e.name: e.identity for e in entries}, gaits=tuple(names))
     return SwitchingSetup(entries, resources)

@@ -66,7 +66,7 @@ class MujocoBackend(SimBackend):
         self._models = [copy.copy(base) for _ in range(num_worlds)]
         self._datas = [mujoco.MjData(m) for m in self._models]
 
-        nj, nf = robot.num_joints, robot.num_feet
+        nj = robot.num_joints
         self._trunk = base.body(robot.trunk_body).id
         self._robot_bodies = np.arange(1, base.nbody)
         self._gravity = base.opt.gravity.copy()

@@ -25,5 +25,8 @@ class RandomStrategy(Strategy):
     def decide(self, query: SwitchQuery) -> Decision:
         k = len(query.source)
         phase = torch.rand(k, generator=self._gen).to(query.source.device)
-        return Decision(switch=torch.ones(k, dtype=torch.bool, device=phase.device), phase=phase,
-                        score=torch.full((k,), float("nan"), device=phase.device))
+        return Decision(
+            switch=torch.ones(k, dtype=torch.bool, device=phase.device),
+            phase=phase,
+            score=torch.full((k,), float("nan"), device=phase.device),
+        )

@@ -15,8 +15,6 @@ transition-net, refused at load time when the library's policies are not the one
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -24,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gaitlib.atomic import write_json
 from gaitlib.errors import TransitionDataError
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
 from gaitlib.transitions.schema import TransitionData
@@ -106,8 +105,11 @@ def sample_scores(table: TransitionTable, data: TransitionData) -> dict[str, np.
     return {"value": value, "tmt": tmt, "tmt-value": tmt * value}
 
 
-def build_table(data: TransitionData, *, identities: dict[str, str], bins: int = PHASE_GRID) -> TransitionTable:
-    """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds."""
+def build_table(
+    data: TransitionData, *, identities: dict[str, str], source: str, bins: int = PHASE_GRID
+) -> TransitionTable:
+    """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds; ``source`` says
+    where the data came from (kept in the table's info)."""
     x, gaits = data.samples, tuple(data.header.gaits)
     g = len(gaits)
     if len(x) == 0:
@@ -135,7 +137,7 @@ def build_table(data: TransitionData, *, identities: dict[str, str], bins: int =
             rows = (x.source == m) & (x.dest == n)
             table.thresholds[name][(m, n)] = best_threshold(scores[name][rows], x.success[rows])
     table.info = {
-        "data": str(data.info.path),
+        "data": source,
         "samples": int(len(x)),
         "bins": bins,
         "score": "alive rate (successes + 1) / (samples + 2) per cell",
@@ -162,17 +164,7 @@ def save_table(path: Path, table: TransitionTable) -> Path:
         },
         "info": table.info,
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(payload, handle)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_json(path, payload, indent=None)
 
 
 def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:

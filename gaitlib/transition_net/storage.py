@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -20,6 +18,7 @@ from pathlib import Path
 
 import torch
 
+from gaitlib.atomic import atomic_path
 from gaitlib.errors import TransitionDataError
 from gaitlib.transition_net.features import FeatureSpec
 from gaitlib.transition_net.fit import FitResult
@@ -76,15 +75,8 @@ def save_net(path: Path, result: FitResult) -> Path:
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
     metadata = json.loads(json.dumps(metadata))  # plain lists and dicts only: loadable with weights_only=True
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         torch.save({"metadata": metadata, "state_dict": net.state_dict()}, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path
 
 

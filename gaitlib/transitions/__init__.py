@@ -2,6 +2,7 @@
 by switching library policies at random moments and phases."""
 
 from gaitlib.transitions.collector import CollectConfig, CollectProgress, CollectResult, collect
+from gaitlib.transitions.combine import read_all
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT, explicit_state
 from gaitlib.transitions.schema import (
     SCHEMA_NAME,
@@ -29,5 +30,6 @@ __all__ = [
     "collect",
     "explicit_state",
     "read",
+    "read_all",
     "validate",
 ]

@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import signal
-import tempfile
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -34,6 +32,7 @@ import h5py
 import numpy as np
 
 import gaitlib
+from gaitlib.atomic import atomic_path
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT
 
@@ -84,7 +83,7 @@ COLUMNS: dict[str, Column] = {
     "explicit": Column("float32", "explicit", "mixed", "source's explicit state at the switch (explicit_layout)"),
     "value_source": Column("float32", None, "1", "source critic value before the switch"),
     "value_dest": Column("float32", None, "1", "destination critic value on the observation right after the switch"),
-    "push_force": Column("float32", None, "N", "largest push magnitude during the source run before the switch (0: none)"),
+    "push_force": Column("float32", None, "N", "largest push magnitude of the source run before the switch (0: none)"),
     "success": Column("uint8", None, "1", "alpha: 1 if no termination within the horizon after the switch"),
     "switch_time": Column("float32", None, "s", "time of the switch since the world's episode start"),
     "world": Column("int32", None, "index", "world that produced the sample"),
@@ -207,10 +206,7 @@ def create(path: Path, *, gaits: list[str], identities: list[str], latent_dim: i
         raise TransitionDataError(f"{path} already exists; open it for appending or choose another path")
     if len(gaits) != len(identities) or len(set(gaits)) != len(gaits) or not 2 <= len(gaits) <= 127:
         raise TransitionDataError(f"need 2-127 distinct gaits with one identity each, got {gaits} / {identities}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["schema"] = SCHEMA_NAME
             f.attrs["schema_version"] = SCHEMA_VERSION
@@ -247,10 +243,6 @@ def create(path: Path, *, gaits: list[str], identities: list[str], latent_dim: i
                 )
                 ds.attrs["description"] = column.description
                 ds.attrs["units"] = column.units
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def open_for_append(path: Path, *, expect: TransitionHeader) -> AppendTarget:

@@ -1,0 +1,310 @@
+"""The disturbance sweep (paper Fig. 4, top): every strategy performs every ordered pair under pushes of fixed
+magnitude, 0 to 500 N, and the success rate of each (strategy, pair, magnitude) cell is counted.
+
+One transition, per world, all worlds at once (a group = one strategy at one magnitude, its pairs interleaved):
+
+1. reset with the source gait m of the least-served pair (reference state initialization, Table 1 randomization);
+2. the meta-controller runs m for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``], no pushes
+   (a fall here is a source fall: the world starts again at 1 with the same pair, nothing is counted);
+3. the switch to n is requested, and from then on pushes of the group's magnitude (random horizontal direction,
+   ``push_duration_s``, a quiet time in ``push_interval_s`` before each) hit the trunk; the strategy switches
+   when it says so, or the request is forced after ``deadline_s``;
+4. success if the robot does not fall from the request until ``horizon_s`` after the switch.
+
+Results are written to ``OUT/results.json`` (atomically) after each group; a rerun with the same settings skips
+the finished groups, so an interrupted sweep loses at most the group under way.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+
+from gaitlib.atomic import write_json
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import PushConfig
+from gaitlib.errors import GaitlibError
+from gaitlib.meta import DEADLINE_S, SwitchingSetup
+from gaitlib.sim import make_backend, resolve_backend_name
+
+__all__ = ["FORMAT_NAME", "CellCounts", "SweepConfig", "default_magnitudes", "group_key", "load_results", "run_sweep"]
+
+FORMAT_NAME = "gaitlib.benchmark"
+FORMAT_VERSION = 1
+_EPISODE_SECONDS = 1e6  # no time-outs: worlds are reset after each transition
+
+
+def default_magnitudes() -> tuple[float, ...]:
+    """0, 50, ..., 500 N (the paper's sweep)."""
+    return tuple(float(m) for m in range(0, 501, 50))
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepConfig:
+    """What the sweep runs. Everything but ``num_worlds``, ``backend`` and ``device`` must match to resume."""
+
+    strategies: tuple[str, ...] = ("random", "value", "tmt", "tmt-value", "net")
+    """Strategy names (:func:`gaitlib.strategies.strategy_names`)."""
+    magnitudes: tuple[float, ...] = default_magnitudes()
+    """Push magnitudes, N."""
+    samples: int = 100
+    """Transitions per (strategy, pair, magnitude) cell."""
+    pairs: tuple[tuple[str, str], ...] | None = None
+    """Ordered (source, destination) pairs; ``None``: every ordered pair of the library's gaits."""
+    num_worlds: int = 256
+    """Parallel worlds."""
+    warmup_s: float = 1.0
+    """Shortest source run after a reset before the request, s."""
+    source_extra_s: float = 1.0
+    """Further source run, uniform in [0, this], s (spreads the source phase at the request)."""
+    horizon_s: float = 2.0
+    """Time after the switch without a fall that makes a success, s."""
+    deadline_s: float = DEADLINE_S
+    """A request not acted on within this time is forced, s."""
+    push_duration_s: tuple[float, float] = (0.1, 0.3)
+    """Duration of each push, s (paper: 0.1-0.3 s)."""
+    push_interval_s: tuple[float, float] = (0.2, 1.0)
+    """Quiet time before each push, from the request on, s."""
+    backend: str = "auto"
+    """Simulation backend."""
+    device: str | None = None
+    """Torch device of the backend (``None``: its default)."""
+    seed: int = 0
+    """Base seed; each group derives its own from it, the strategy and the magnitude."""
+
+    def settings(self) -> dict:
+        """The settings a resumed sweep must repeat."""
+        fixed = asdict(self)
+        for name in ("num_worlds", "backend", "device"):
+            fixed.pop(name)
+        return json.loads(json.dumps(fixed))
+
+
+@dataclass
+class CellCounts:
+    """Outcomes of one (strategy, pair, magnitude) cell."""
+
+    samples: int = 0
+    successes: int = 0
+    forced: int = 0
+    """Switches made by the deadline rather than the strategy."""
+    wait_s: float = 0.0
+    """Total time from request to switch over the transitions that switched, s."""
+    switched: int = 0
+    """Transitions that reached the switch (the others fell while waiting)."""
+    source_falls: int = 0
+    """Source runs that fell before the request (redone, not counted in ``samples``)."""
+
+
+def group_key(strategy: str, magnitude: float) -> str:
+    """The key of a (strategy, magnitude) group in ``results.json``, e.g. ``net@300``."""
+    return f"{strategy}@{magnitude:g}"
+
+
+def load_results(out: Path) -> dict:
+    """``OUT/results.json`` (a one-line error for a foreign or unreadable file); ``{}`` when there is none."""
+    path = Path(out) / "results.json"
+    if not path.is_file():
+        return {}
+    try:
+        results = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise GaitlibError(f"{path} is not readable benchmark results ({type(error).__name__})") from error
+    if results.get("format") != FORMAT_NAME or results.get("format_version") != FORMAT_VERSION:
+        raise GaitlibError(f"{path} is not gaitlib benchmark results of format version {FORMAT_VERSION}")
+    return results
+
+
+def run_sweep(
+    out: Path,
+    setup: SwitchingSetup,
+    config: SweepConfig,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> dict:
+    """Run (or resume) the sweep into ``out``; returns the results dict (as written to ``results.json``).
+
+    ``progress(group, done, total)`` is called as transitions finish (``done`` over the whole sweep).
+    """
+    cfg = config
+    out = Path(out)
+    pairs = _pairs(cfg, setup)
+    settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
+    identities = dict(setup.resources.identities)
+    results = load_results(out)
+    if results:
+        if results["settings"] != settings or results["library_identities"] != identities:
+            raise GaitlibError(
+                f"{out} holds a benchmark with other settings or policies; use another --out or delete it"
+            )
+    else:
+        results = {
+            "format": FORMAT_NAME,
+            "format_version": FORMAT_VERSION,
+            "settings": settings,
+            "library_identities": identities,
+            "groups": {},
+        }
+    groups = list(itertools.product(cfg.strategies, cfg.magnitudes))
+    per_group = cfg.samples * len(pairs)
+    done = sum(per_group for s, m in groups if group_key(s, m) in results["groups"])
+    total = per_group * len(groups)
+    for strategy, magnitude in groups:
+        key = group_key(strategy, magnitude)
+        if key in results["groups"]:
+            continue
+        start = time.perf_counter()
+        base = done
+
+        def report(finished: int, key: str = key, base: int = base) -> None:
+            if progress is not None:
+                progress(key, base + finished, total)
+
+        cells = _run_group(setup, strategy, magnitude, pairs, cfg, report)
+        done = base + per_group
+        results["groups"][key] = {
+            "strategy": strategy,
+            "magnitude_n": magnitude,
+            "backend": resolve_backend_name(cfg.backend),
+            "elapsed_s": round(time.perf_counter() - start, 2),
+            "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
+        }
+        write_json(out / "results.json", results, indent=1)
+    return results
+
+
+def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
+    if cfg.samples < 1 or cfg.num_worlds < 1:
+        raise GaitlibError("samples and worlds must be positive")
+    if not cfg.strategies or not cfg.magnitudes:
+        raise GaitlibError("give at least one strategy and one magnitude")
+    if any(m < 0 for m in cfg.magnitudes):
+        raise GaitlibError("push magnitudes must not be negative")
+    if cfg.pairs is None:
+        return list(itertools.permutations(setup.gaits, 2))
+    for m, n in cfg.pairs:
+        setup.gait_index(m), setup.gait_index(n)
+        if m == n:
+            raise GaitlibError(f"pair {m}-{n}: source and destination must differ")
+    return list(dict.fromkeys(cfg.pairs))
+
+
+def _run_group(
+    setup: SwitchingSetup,
+    strategy: str,
+    magnitude: float,
+    pairs: Sequence[tuple[str, str]],
+    cfg: SweepConfig,
+    report: Callable[[int], None],
+) -> dict[tuple[str, str], CellCounts]:
+    """All transitions of one strategy at one push magnitude."""
+    seed = int.from_bytes(f"{cfg.seed}/{strategy}/{magnitude:g}".encode(), "little") % (2**31)
+    sim = make_backend(cfg.backend, num_worlds=cfg.num_worlds, device=cfg.device)
+    try:
+        pushes = PushConfig(
+            max_force=magnitude, fixed_force=True, duration=cfg.push_duration_s, interval=cfg.push_interval_s
+        )
+        env = setup.make_env(sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
+        controller = setup.controller(env, strategy, deadline_s=cfg.deadline_s, seed=seed)
+        return _Group(env, controller, pairs, setup, cfg, seed, report).run()
+    finally:
+        sim.close()
+
+
+class _Group:
+    """Per-world transition state machines (stage: 0 source run, 1 waiting for the switch, 2 after it)."""
+
+    SOURCE, WAITING, AFTER, IDLE = 0, 1, 2, 3
+
+    def __init__(self, env, controller, pairs, setup, cfg: SweepConfig, seed: int, report) -> None:
+        self.env, self.ctl, self.cfg, self.report = env, controller, cfg, report
+        dev, n = env.device, env.num_envs
+        self.pairs = list(pairs)
+        self.source = torch.tensor([setup.gait_index(m) for m, _ in pairs], device=dev)
+        self.dest = torch.tensor([setup.gait_index(d) for _, d in pairs], device=dev)
+        self.cells = {pair: CellCounts() for pair in pairs}
+        self.started = [0] * len(pairs)  # transitions begun (finished or under way) per pair
+        self.finished = 0
+        self.gen = torch.Generator().manual_seed(seed)
+        self.pair = torch.zeros(n, dtype=torch.long, device=dev)
+        self.stage = torch.full((n,), self.IDLE, dtype=torch.long, device=dev)
+        self.steps_left = torch.zeros(n, dtype=torch.long, device=dev)
+        self.warmup = round(cfg.warmup_s / env.dt)
+        self.extra = round(cfg.source_extra_s / env.dt)
+        self.horizon = max(1, round(cfg.horizon_s / env.dt))
+        env.enable_pushes(torch.arange(n, device=dev), False)
+        self._begin(torch.arange(n, device=dev))
+
+    def run(self) -> dict[tuple[str, str], CellCounts]:
+        while bool((self.stage != self.IDLE).any()):
+            self.step()
+        return self.cells
+
+    def step(self) -> None:
+        result = self.ctl.step()
+        self.steps_left -= 1
+        for event in result.events:
+            w = event.world
+            if int(self.stage[w]) != self.WAITING:
+                continue
+            cell = self.cells[self.pairs[int(self.pair[w])]]
+            cell.switched += 1
+            cell.forced += int(event.forced)
+            cell.wait_s += event.wait_s
+            self.stage[w] = self.AFTER
+            self.steps_left[w] = self.horizon
+        fell = result.fell
+        source_fell = fell & (self.stage == self.SOURCE)
+        for w in source_fell.nonzero().squeeze(1).tolist():
+            self.cells[self.pairs[int(self.pair[w])]].source_falls += 1
+        failed = fell & ((self.stage == self.WAITING) | (self.stage == self.AFTER))
+        succeeded = ~fell & (self.stage == self.AFTER) & (self.steps_left <= 0)
+        due = ~fell & (self.stage == self.SOURCE) & (self.steps_left <= 0)
+        for mask, ok in ((failed, False), (succeeded, True)):
+            for w in mask.nonzero().squeeze(1).tolist():
+                cell = self.cells[self.pairs[int(self.pair[w])]]
+                cell.samples += 1
+                cell.successes += int(ok)
+                self.finished += 1
+            if mask.any():
+                self.report(self.finished)
+        if source_fell.any():
+            self._start_source(source_fell.nonzero().squeeze(1))
+        ended = failed | succeeded
+        if ended.any():
+            ids = ended.nonzero().squeeze(1)
+            self.env.enable_pushes(ids, False)
+            self.ctl.cancel(ids)
+            self._begin(ids)
+        if due.any():
+            ids = due.nonzero().squeeze(1)
+            self.ctl.request(ids, self.dest[self.pair[ids]])
+            self.env.enable_pushes(ids, True)
+            self.stage[ids] = self.WAITING
+
+    def _begin(self, ids: torch.Tensor) -> None:
+        """Start worlds ``ids`` on the least-started pair that still needs transitions, or leave them idle."""
+        starting = []
+        for w in ids.tolist():
+            open_pairs = [i for i, s in enumerate(self.started) if s < self.cfg.samples]
+            if not open_pairs:
+                self.stage[w] = self.IDLE
+                continue
+            chosen = min(open_pairs, key=lambda i: self.started[i])
+            self.started[chosen] += 1
+            self.pair[w] = chosen
+            starting.append(w)
+        if starting:
+            self._start_source(torch.tensor(starting, dtype=torch.long, device=self.env.device))
+
+    def _start_source(self, ids: torch.Tensor) -> None:
+        self.env.reset_worlds(ids, gait=self.source[self.pair[ids]])
+        self.stage[ids] = self.SOURCE
+        extra = torch.randint(self.extra + 1, (len(ids),), generator=self.gen).to(self.env.device)
+        self.steps_left[ids] = self.warmup + extra

@@ -1,0 +1,159 @@
+"""Reading a disturbance sweep: success rates with 95% intervals, the CSV, the Fig. 4 plot and the summary.
+
+The interval is Wilson's score interval for a binomial proportion (sound at 0% and 100%, unlike the normal one).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from gaitlib.atomic import atomic_path
+
+__all__ = ["CellResult", "cell_results", "success_table", "summary", "wilson_interval", "write_csv", "write_plot"]
+
+_Z95 = 1.959963984540054
+
+
+def wilson_interval(successes: int, samples: int, z: float = _Z95) -> tuple[float, float]:
+    """95% (by default) Wilson score interval of a success rate; (0, 1) without samples."""
+    if samples == 0:
+        return 0.0, 1.0
+    p = successes / samples
+    denominator = 1 + z * z / samples
+    centre = (p + z * z / (2 * samples)) / denominator
+    half = z * math.sqrt(p * (1 - p) / samples + z * z / (4 * samples * samples)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass(frozen=True)
+class CellResult:
+    """One (strategy, pair, magnitude) cell of a sweep."""
+
+    strategy: str
+    pair: str
+    """``source-destination``, e.g. ``trot-stand``."""
+    magnitude_n: float
+    samples: int
+    successes: int
+    success_rate: float
+    ci95_low: float
+    ci95_high: float
+    forced_rate: float
+    """Share of the switches the deadline forced."""
+    mean_wait_s: float
+    """Mean time from request to switch over the transitions that switched, s."""
+    source_falls: int
+
+
+def cell_results(results: dict) -> list[CellResult]:
+    """Every finished cell of ``results`` (as :func:`~gaitlib.bench.sweep.run_sweep` returns), strategy, pair and
+    magnitude in sweep order."""
+    rows = []
+    for group in results["groups"].values():
+        for pair, c in group["cells"].items():
+            low, high = wilson_interval(c["successes"], c["samples"])
+            rows.append(
+                CellResult(
+                    strategy=group["strategy"],
+                    pair=pair,
+                    magnitude_n=float(group["magnitude_n"]),
+                    samples=c["samples"],
+                    successes=c["successes"],
+                    success_rate=c["successes"] / c["samples"] if c["samples"] else float("nan"),
+                    ci95_low=low,
+                    ci95_high=high,
+                    forced_rate=c["forced"] / c["switched"] if c["switched"] else 0.0,
+                    mean_wait_s=c["wait_s"] / c["switched"] if c["switched"] else float("nan"),
+                    source_falls=c["source_falls"],
+                )
+            )
+    return rows
+
+
+def success_table(rows: list[CellResult]) -> dict[str, dict[str, dict[str, float]]]:
+    """strategy -> pair -> magnitude (as ``"%g"``) -> success rate."""
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for r in rows:
+        table.setdefault(r.strategy, {}).setdefault(r.pair, {})[f"{r.magnitude_n:g}"] = r.success_rate
+    return table
+
+
+def summary(rows: list[CellResult]) -> dict:
+    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and per pair the margin
+    of ``net`` over the best other strategy (percentage points), where those exist."""
+    means: dict[str, dict[str, float]] = {}
+    for strategy in dict.fromkeys(r.strategy for r in rows):
+        per_pair: dict[str, list[float]] = {}
+        for r in rows:
+            if r.strategy == strategy:
+                per_pair.setdefault(r.pair, []).append(r.success_rate)
+        means[strategy] = {pair: sum(v) / len(v) for pair, v in per_pair.items()}
+    overall = {s: sum(p.values()) / len(p) for s, p in means.items()}
+    margins = {}
+    if "net" in means:
+        for pair, value in means["net"].items():
+            others = [(means[s][pair], s) for s in means if s != "net" and pair in means[s]]
+            if others:
+                best, name = max(others)
+                margins[pair] = {"second_best": name, "margin_pp": 100 * (value - best)}
+    return {
+        "mean_success": means,
+        "overall": overall,
+        "ranking": sorted(overall, key=overall.get, reverse=True),
+        "net_margin": margins,
+    }
+
+
+def write_csv(path: Path, rows: list[CellResult]) -> Path:
+    """All cells as CSV (atomically)."""
+    path = Path(path)
+    fields = list(CellResult.__dataclass_fields__)
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(fields)
+        for r in rows:
+            writer.writerow([f"{v:.4f}" if isinstance(v, float) else v for v in (getattr(r, f) for f in fields)])
+    return path
+
+
+def write_plot(path: Path, rows: list[CellResult], *, title: str = "") -> Path:
+    """Success rate against push magnitude, one panel per pair, one line (with its 95% band) per strategy, in the
+    layout of paper Fig. 4 (top). PNG, written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    pairs = list(dict.fromkeys(r.pair for r in rows))
+    strategies = list(dict.fromkeys(r.strategy for r in rows))
+    columns = min(3, len(pairs))
+    lines = math.ceil(len(pairs) / columns)
+    fig, axes = plt.subplots(lines, columns, figsize=(4.2 * columns, 3.3 * lines), squeeze=False, sharey=True)
+    for ax, pair in zip(axes.flat, pairs, strict=False):
+        for strategy in strategies:
+            cells = sorted((r for r in rows if r.pair == pair and r.strategy == strategy), key=lambda r: r.magnitude_n)
+            x = [r.magnitude_n for r in cells]
+            ax.plot(x, [r.success_rate for r in cells], marker="o", markersize=3, label=strategy)
+            ax.fill_between(x, [r.ci95_low for r in cells], [r.ci95_high for r in cells], alpha=0.15)
+        ax.set_title(pair.replace("-", " → "))
+        ax.set_xlabel("push magnitude (N)")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("success rate")
+    for ax in list(axes.flat)[len(pairs) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
+    finally:
+        plt.close(fig)
+    return path

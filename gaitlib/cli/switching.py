@@ -1,0 +1,185 @@
+"""``gaitlib run`` (one robot, one requested switch, with a plot and a video) and ``gaitlib benchmark`` (the
+disturbance sweep of every strategy over every pair)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+__all__ = ["benchmark_command", "run_command"]
+
+
+def run_command(
+    source: str = typer.Option("trot", "--from", help="Gait the robot starts in."),
+    dest: str = typer.Option("stand", "--to", help="Gait requested."),
+    strategy: str = typer.Option("net", "--strategy", help="random, value, tmt, tmt-value or net."),
+    request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s."),
+    push: float = typer.Option(0.0, "--push", help="Push magnitude from the request on, N (0: none)."),
+    seconds: float = typer.Option(6.0, "--seconds", help="Length of the run, s."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (randomization, pushes, strategy)."),
+    plot: Path = typer.Option(Path("run.png"), "--plot", help="Where to write the plot (PNG)."),
+    video: Path | None = typer.Option(None, "--video", help="Also render a video of the run (MP4)."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Run one robot in --from, request --to, and let the meta-controller switch with --strategy."""
+    from gaitlib.errors import GaitlibError
+    from gaitlib.meta import load_switching
+    from gaitlib.meta.episode import run_episode
+    from gaitlib.meta.trace_plot import plot_trace
+    from gaitlib.training import default_library_dir
+
+    if not 0.0 <= request_at < seconds:
+        raise GaitlibError(f"--request-at must lie in [0, --seconds) = [0, {seconds:g})")
+    setup = load_switching(library or default_library_dir())
+    trace = run_episode(
+        setup,
+        source=source,
+        dest=dest,
+        strategy=strategy,
+        request_s=request_at,
+        push_n=push,
+        seconds=seconds,
+        backend=backend,
+        seed=seed,
+    )
+    plot_trace(trace, plot)
+    if video is not None:
+        from gaitlib.meta.video import render_video
+        from gaitlib.robots import get_robot
+
+        render_video(trace.qpos, video, fps=1.0 / trace.dt, model_xml=get_robot("a1").mjcf_path)
+    event = trace.switch
+    report = {
+        "from": source,
+        "to": dest,
+        "strategy": strategy,
+        "request_s": request_at,
+        "switch_s": trace.switch_s,
+        "wait_s": None if event is None else event.wait_s,
+        "score": None if event is None else event.score,
+        "phase": None if event is None else event.phase,
+        "forced": None if event is None else event.forced,
+        "stayed_up": trace.stayed_up,
+        "fell_s": trace.fell_s,
+        "plot": str(plot),
+        "video": None if video is None else str(video),
+    }
+    if as_json:
+        print(json.dumps(report))
+        return
+    if event is None:
+        switched = "no switch happened"
+    else:
+        how = "forced by the deadline" if event.forced else f"score {event.score:.3f}"
+        switched = (
+            f"switched at {trace.switch_s:.2f} s after waiting {event.wait_s:.2f} s ({how}, φn = {event.phase:.3f})"
+        )
+    outcome = "stayed up" if trace.stayed_up else f"FELL at {trace.fell_s:.2f} s"
+    print(f"{source} -> {dest} with {strategy}: requested at {request_at:.2f} s, {switched}; the robot {outcome}")
+    print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
+
+
+def benchmark_command(
+    strategies: str = typer.Option(
+        "random,value,tmt,tmt-value,net", "--strategies", help="Comma-separated strategies to compare."
+    ),
+    magnitudes: str = typer.Option("0:500:50", "--magnitudes", help="Push magnitudes, N: START:STOP:STEP or a list."),
+    samples: int = typer.Option(100, "--samples", help="Transitions per (strategy, pair, magnitude) cell."),
+    pairs: str | None = typer.Option(None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all)."),
+    out: Path = typer.Option(Path("benchmark"), "--out", help="Output folder (resumed if it holds results)."),
+    worlds: int = typer.Option(256, "--worlds", help="Parallel worlds."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (success per strategy, pair, N)."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot."""
+    from rich.console import Console
+
+    from gaitlib.bench.sweep import SweepConfig, run_sweep
+    from gaitlib.bench.sweep_report import cell_results, success_table, summary, write_csv, write_plot
+    from gaitlib.cli.options import parse_pairs
+    from gaitlib.cli.progress import job_progress
+    from gaitlib.errors import GaitlibError
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies import get_strategy
+    from gaitlib.training import default_library_dir
+
+    setup = load_switching(library or default_library_dir())
+    names = tuple(s.strip() for s in strategies.split(",") if s.strip())
+    for name in names:
+        get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
+    config = SweepConfig(
+        strategies=names,
+        magnitudes=_parse_magnitudes(magnitudes),
+        samples=samples,
+        pairs=parse_pairs(pairs, list(setup.gaits)),
+        num_worlds=worlds,
+        backend=backend,
+        seed=seed,
+    )
+    console = Console(stderr=True)
+    total = len(config.strategies) * len(config.magnitudes) * samples * len(config.pairs or _all_pairs(setup.gaits))
+    with job_progress(console, "benchmark") as progress:
+        task = progress.add_task("benchmark", total=total, status="starting")
+
+        def show(group: str, done: int, total: int) -> None:
+            progress.update(task, completed=done, status=group)
+
+        results = run_sweep(out, setup, config, progress=show)
+    rows = cell_results(results)
+    if not rows:
+        raise GaitlibError("the benchmark produced no results")
+    write_csv(out / "results.csv", rows)
+    plot = write_plot(out / "success.png", rows, title=f"{samples} transitions per point, 95% Wilson intervals")
+    facts = summary(rows)
+    if as_json:
+        print(json.dumps({"success": success_table(rows), "summary": facts, "out": str(out)}))
+        return
+    _print_summary(facts, out, plot)
+
+
+def _parse_magnitudes(text: str) -> tuple[float, ...]:
+    from gaitlib.errors import GaitlibError
+
+    try:
+        if ":" in text:
+            start, stop, step = (float(v) for v in text.split(":"))
+            if step <= 0:
+                raise ValueError
+            count = int(round((stop - start) / step)) + 1
+            return tuple(round(start + i * step, 6) for i in range(count))
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise GaitlibError(f"--magnitudes '{text}': give START:STOP:STEP (e.g. 0:500:50) or a list") from None
+
+
+def _all_pairs(gaits: tuple[str, ...]) -> list[tuple[str, str]]:
+    return [(m, n) for m in gaits for n in gaits if m != n]
+
+
+def _print_summary(facts: dict, out: Path, plot: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    means = facts["mean_success"]
+    pairs = list(dict.fromkeys(p for per in means.values() for p in per))
+    table = Table(title="mean success over push magnitudes")
+    table.add_column("strategy")
+    for pair in pairs:
+        table.add_column(pair, justify="right")
+    table.add_column("all", justify="right")
+    for strategy in facts["ranking"]:
+        per = means[strategy]
+        table.add_row(
+            strategy, *(f"{per[p]:.3f}" if p in per else "-" for p in pairs), f"{facts['overall'][strategy]:.3f}"
+        )
+    console = Console()
+    console.print(table)
+    for pair, margin in facts["net_margin"].items():
+        console.print(f"net vs {margin['second_best']} on {pair}: {margin['margin_pp']:+.1f} percentage points")
+    console.print(f"results: {out / 'results.csv'}, {out / 'results.json'}; plot: {plot}")

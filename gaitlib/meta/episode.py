@@ -1,0 +1,138 @@
+"""One robot, one requested switch: what ``gaitlib run`` does, recorded step by step for the plot and the video."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import PushConfig
+from gaitlib.meta.controller import DEADLINE_S, SwitchEvent
+from gaitlib.meta.session import SwitchingSetup
+from gaitlib.sim import make_backend
+
+__all__ = ["RunTrace", "run_episode"]
+
+
+@dataclass
+class RunTrace:
+    """A recorded run: per control step arrays (T = steps run) and the switch."""
+
+    gaits: tuple[str, ...]
+    source: str
+    dest: str
+    strategy: str
+    threshold: float | None
+    """The strategy's threshold for this pair (``None`` for ``random``)."""
+    dt: float
+    """Control period, s."""
+    request_s: float
+    """When the switch was requested, s."""
+    push_n: float
+    """Push magnitude from the request on, N (0: none)."""
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) time at the end of each step, s."""
+    active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    """(T,) active gait index during each step."""
+    score: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) the strategy's best candidate score while the request waited (NaN otherwise)."""
+    best_phase: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) the best candidate destination phase while the request waited, cycles (NaN otherwise)."""
+    root_height: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) trunk height, m."""
+    foot_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=bool))
+    """(T, 4) foot contacts (FR, FL, RR, RL)."""
+    qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 19)))
+    """(T, 19) generalized positions (trunk position, quaternion w-x-y-z, 12 joints) for rendering."""
+    switch: SwitchEvent | None = None
+    """The switch, if one happened."""
+    fell_s: float | None = None
+    """When the robot fell (the run stops there), s; ``None`` if it stayed up."""
+
+    @property
+    def stayed_up(self) -> bool:
+        return self.fell_s is None
+
+    @property
+    def switch_s(self) -> float | None:
+        """When the switch happened, s."""
+        return None if self.switch is None else self.switch.step * self.dt
+
+
+def run_episode(
+    setup: SwitchingSetup,
+    *,
+    source: str,
+    dest: str,
+    strategy: str = "net",
+    request_s: float = 2.0,
+    push_n: float = 0.0,
+    seconds: float = 6.0,
+    deadline_s: float = DEADLINE_S,
+    backend: str = "auto",
+    seed: int = 0,
+) -> RunTrace:
+    """Run one robot on ``source``, request ``dest`` at ``request_s``, let ``strategy`` switch; pushes of ``push_n``
+    (random direction, 0.1-0.3 s, every 1-3 s) hit it from the request on. Stops at ``seconds`` or at a fall."""
+    m, n = setup.gait_index(source), setup.gait_index(dest)
+    if m == n:
+        from gaitlib.errors import GaitlibError
+
+        raise GaitlibError(f"--from and --to are both '{source}'")
+    sim = make_backend(backend, num_worlds=1)
+    try:
+        env = setup.make_env(
+            sim,
+            EnvConfig(episode_seconds=seconds + 1.0, pushes=PushConfig(max_force=push_n, fixed_force=True)),
+            seed=seed,
+        )
+        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
+        world = torch.zeros(1, dtype=torch.long, device=env.device)
+        env.reset_worlds(world, gait=torch.tensor([m], device=env.device))
+        env.enable_pushes(world, False)
+        threshold = ctl.strategy.threshold
+        if isinstance(threshold, dict):
+            threshold = threshold.get((m, n))
+        trace = RunTrace(
+            gaits=setup.gaits,
+            source=source,
+            dest=dest,
+            strategy=strategy,
+            threshold=None if strategy == "random" else threshold,
+            dt=env.dt,
+            request_s=request_s,
+            push_n=push_n,
+        )
+        rows: dict[str, list] = {k: [] for k in ("time", "active", "score", "phase", "height", "contact", "qpos")}
+        request_step = round(request_s / env.dt)
+        for step in range(round(seconds / env.dt)):
+            if step == request_step:
+                ctl.request(world, n)
+                env.enable_pushes(world, push_n > 0)
+            active = int(env.gait[0])
+            result = ctl.step()
+            if result.events:
+                trace.switch = result.events[0]
+            if bool(result.fell[0]):
+                trace.fell_s = (step + 1) * env.dt
+                break
+            s = env.sim_state
+            rows["time"].append((step + 1) * env.dt)
+            rows["active"].append(active if not result.events else n)
+            rows["score"].append(float(result.best_score[0]))
+            rows["phase"].append(float(result.best_phase[0]))
+            rows["height"].append(float(s.root_pos[0, 2]))
+            rows["contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
+            rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
+        trace.time_s = np.asarray(rows["time"])
+        trace.active = np.asarray(rows["active"], dtype=np.int64)
+        trace.score = np.asarray(rows["score"])
+        trace.best_phase = np.asarray(rows["phase"])
+        trace.root_height = np.asarray(rows["height"])
+        trace.foot_contact = np.asarray(rows["contact"], dtype=bool).reshape(-1, 4)
+        trace.qpos = np.asarray(rows["qpos"]).reshape(len(rows["qpos"]), -1)
+        return trace
+    finally:
+        sim.close()

@@ -1,0 +1,74 @@
+"""The figure ``gaitlib run`` writes: score and chosen phase, trunk height, and the foot-contact gait diagram."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gaitlib.atomic import atomic_path
+from gaitlib.meta.episode import RunTrace
+
+__all__ = ["plot_trace"]
+
+_FEET = ("FR", "FL", "RR", "RL")
+
+
+def plot_trace(trace: RunTrace, path: Path) -> Path:
+    """Write ``trace`` as a three-panel PNG (atomically): the strategy's best score and its destination phase
+    while the request waits (threshold dashed), trunk height, and the gait diagram (feet in contact, dark) with
+    the request and the switch marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    t = trace.time_s
+    fig, (ax_score, ax_height, ax_feet) = plt.subplots(
+        3, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1.3, 1.2]}
+    )
+    ax_score.plot(t, trace.score, color="tab:blue", label="best score")
+    if trace.threshold is not None and np.isfinite(trace.threshold):
+        ax_score.axhline(trace.threshold, color="tab:blue", linestyle="--", linewidth=1, label="threshold")
+    ax_score.set_ylabel(f"{trace.strategy} score")
+    phase_axis = ax_score.twinx()
+    phase_axis.plot(t, trace.best_phase, ".", color="tab:orange", markersize=3, label="chosen φn")
+    phase_axis.set_ylabel("chosen φn (cycles)")
+    phase_axis.set_ylim(0, 1)
+    ax_score.legend(loc="upper left", fontsize=8)
+    ax_height.plot(t, trace.root_height, color="black")
+    ax_height.set_ylabel("trunk height (m)")
+    contact = trace.foot_contact.T.astype(float)
+    if len(t):
+        ax_feet.imshow(
+            contact,
+            aspect="auto",
+            cmap="Greys",
+            vmin=0,
+            vmax=1,
+            interpolation="nearest",
+            extent=(t[0] - trace.dt, t[-1], len(_FEET) - 0.5, -0.5),
+        )
+    ax_feet.set_yticks(range(len(_FEET)), _FEET)
+    ax_feet.set_xlabel("time (s)")
+    for ax in (ax_score, ax_height, ax_feet):
+        ax.axvline(trace.request_s, color="tab:green", linestyle=":", linewidth=1.5)
+        if trace.switch_s is not None:
+            ax.axvline(trace.switch_s, color="tab:red", linewidth=1.5)
+        if trace.fell_s is not None:
+            ax.axvline(trace.fell_s, color="tab:purple", linewidth=1.5)
+    outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s"
+    switched = "no switch" if trace.switch is None else f"switched at {trace.switch_s:.2f} s"
+    fig.suptitle(
+        f"{trace.source} → {trace.dest}, strategy {trace.strategy}, push {trace.push_n:g} N: "
+        f"request {trace.request_s:.2f} s (green), {switched} (red), {outcome}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
+    finally:
+        plt.close(fig)
+    return path

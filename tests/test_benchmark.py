@@ -1,0 +1,90 @@
+"""The disturbance sweep on the real simulator at a tiny size: well-formed outputs, resumption, intervals."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+
+import pytest
+
+from gaitlib.bench.sweep import SweepConfig, load_results, run_sweep
+from gaitlib.bench.sweep_report import cell_results, success_table, summary, wilson_interval, write_csv, write_plot
+from gaitlib.errors import GaitlibError
+from gaitlib.meta import load_switching
+
+TINY = SweepConfig(
+    strategies=("random", "net"),
+    magnitudes=(0.0, 300.0),
+    samples=3,
+    pairs=(("trot", "stand"),),
+    num_worlds=4,
+    warmup_s=0.3,
+    source_extra_s=0.2,
+    horizon_s=0.5,
+    deadline_s=0.3,
+    backend="mujoco",
+)
+
+
+def test_wilson_interval_matches_hand_computed_values() -> None:
+    low, high = wilson_interval(0, 10)
+    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-4)
+    low, high = wilson_interval(5, 10)
+    assert (low, high) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) -> None:
+    setup = load_switching(switching_library)
+    out = tmp_path / "bench"
+    calls = []
+
+    def stop_after_first_group(group: str, done: int, total: int) -> None:
+        calls.append((group, done, total))
+        if group != "random@0":
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(out, setup, TINY, progress=stop_after_first_group)
+    first = load_results(out)
+    assert list(first["groups"]) == ["random@0"]  # the finished group is kept, the interrupted one is not
+    assert calls[-1][2] == 4 * 3 and calls[0][1] >= 1
+
+    results = run_sweep(out, setup, TINY)
+    assert list(results["groups"]) == ["random@0", "random@300", "net@0", "net@300"]
+    assert results["groups"]["random@0"] == first["groups"]["random@0"]
+    for group in results["groups"].values():
+        cell = group["cells"]["trot-stand"]
+        assert cell["samples"] == 3 and 0 <= cell["successes"] <= 3
+        assert cell["switched"] <= 3 and cell["forced"] <= cell["switched"]
+    assert results["groups"]["random@0"]["cells"]["trot-stand"]["wait_s"] == 0.0  # random switches at once
+    net = results["groups"]["net@0"]["cells"]["trot-stand"]
+    assert net["wait_s"] <= net["switched"] * (TINY.deadline_s + 1e-6)
+
+    again = run_sweep(out, setup, TINY, progress=lambda *a: pytest.fail("a finished sweep must not run again"))
+    assert again == results
+
+    rows = cell_results(results)
+    assert len(rows) == 4 and all(r.ci95_low <= r.success_rate <= r.ci95_high for r in rows)
+    table = success_table(rows)
+    assert set(table) == {"random", "net"} and set(table["net"]["trot-stand"]) == {"0", "300"}
+    facts = summary(rows)
+    assert set(facts["ranking"]) == {"random", "net"} and "trot-stand" in facts["net_margin"]
+    write_csv(tmp_path / "r.csv", rows)
+    with open(tmp_path / "r.csv") as handle:
+        lines = list(csv.DictReader(handle))
+    assert len(lines) == 4 and {line["strategy"] for line in lines} == {"random", "net"}
+    plot = write_plot(tmp_path / "r.png", rows)
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_resuming_with_other_settings_is_refused(switching_library, tmp_path) -> None:
+    setup = load_switching(switching_library)
+    small = dataclasses.replace(TINY, strategies=("random",), magnitudes=(0.0,), samples=1)
+    run_sweep(tmp_path, setup, small)
+    with pytest.raises(GaitlibError, match="other settings"):
+        run_sweep(tmp_path, setup, dataclasses.replace(small, samples=2))
+    (tmp_path / "results.json").write_text(json.dumps({"format": "something else"}))
+    with pytest.raises(GaitlibError, match="not gaitlib benchmark results"):
+        run_sweep(tmp_path, setup, small)

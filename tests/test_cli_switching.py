@@ -1,0 +1,91 @@
+"""``gaitlib run`` and ``gaitlib benchmark`` end to end, on a tiny library and on the shipped one."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SHIPPED = Path(__file__).resolve().parents[1] / "library"
+
+
+def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path) -> None:
+    plot = tmp_path / "run.png"
+    result = gaitlib(
+        "run", "--from", "trot", "--to", "stand", "--strategy", "tmt", "--request-at", "0.5", "--seconds", "1.5",
+        "--plot", str(plot), "--library", str(switching_library), "--backend", "mujoco", "--json",
+    )
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["from"] == "trot" and report["to"] == "stand" and report["strategy"] == "tmt"
+    assert report["switch_s"] is None or report["switch_s"] >= 0.5 - 1e-9
+    assert isinstance(report["stayed_up"], bool)
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_with_a_video_renders_it_or_says_in_one_line_why_not(switching_library, tmp_path) -> None:
+    video = tmp_path / "run.mp4"
+    result = gaitlib(
+        "run", "--strategy", "random", "--request-at", "0.2", "--seconds", "0.5", "--plot", str(tmp_path / "p.png"),
+        "--video", str(video), "--library", str(switching_library), "--backend", "mujoco",
+    )
+    if result.returncode == 0:
+        assert video.stat().st_size > 1000
+    else:
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and ("--video" in lines[0] or "OpenGL" in lines[0])
+        assert not video.exists()
+
+
+def test_unknown_gait_or_strategy_is_one_error_line(switching_library) -> None:
+    for args, message in (
+        (("--to", "gallop"), "unknown gait 'gallop'"),
+        (("--strategy", "oracle"), "unknown strategy 'oracle'"),
+    ):
+        result = gaitlib("run", *args, "--library", str(switching_library))
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and message in lines[0], result.stderr
+
+
+def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library, tmp_path) -> None:
+    out = tmp_path / "bench"
+    args = [
+        "benchmark", "--strategies", "random,tmt-value", "--magnitudes", "0:100:100", "--samples", "2", "--pairs",
+        "stand-trot", "--worlds", "4", "--out", str(out), "--library", str(switching_library), "--backend", "mujoco",
+    ]
+    result = gaitlib(*args, "--json")
+    assert result.returncode == 0, result.stderr
+    success = json.loads(result.stdout)["success"]
+    assert set(success) == {"random", "tmt-value"}
+    assert set(success["random"]) == {"stand-trot"} and set(success["random"]["stand-trot"]) == {"0", "100"}
+    assert all(0.0 <= v <= 1.0 for v in success["tmt-value"]["stand-trot"].values())
+    assert {p.name for p in out.iterdir()} >= {"results.json", "results.csv", "success.png"}
+    again = gaitlib(*args)  # everything is done: it only reports
+    assert again.returncode == 0 and "mean success over push magnitudes" in again.stdout
+
+
+def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:
+    result = gaitlib("benchmark", "--magnitudes", "0:500", "--library", str(switching_library))
+    assert result.returncode == 2 and "--magnitudes" in result.stderr.strip().splitlines()[0]
+
+
+@pytest.mark.skipif(not (SHIPPED / "transition_net" / "net.pt").is_file(), reason="no shipped transition-net yet")
+def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
+    plot = tmp_path / "run.png"
+    result = gaitlib("run", "--from", "trot", "--to", "stand", "--plot", str(plot), "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["switch_s"] is not None and report["stayed_up"] is True
+    assert plot.is_file()

@@ -1,0 +1,135 @@
+"""The meta-controller (paper Algorithm 1) on the real simulator with a tiny library."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import RandomizationConfig
+from gaitlib.meta import MetaController, load_switching
+from gaitlib.meta.episode import run_episode
+from gaitlib.sim import make_backend
+from gaitlib.strategies.net import NetStrategy
+from gaitlib.strategies.value import ValueStrategy
+
+
+class Tagged(torch.nn.Module):
+    """A library policy whose actions are all ``tag`` (its latent and value are the real policy's)."""
+
+    def __init__(self, policy, tag: float) -> None:
+        super().__init__()
+        self.policy, self.tag = policy, tag
+
+    def act(self, obs):
+        return torch.full((obs.batch_size[0], 12), self.tag)
+
+    def latent(self, obs):
+        return self.policy.latent(obs)
+
+    def value(self, obs):
+        return self.policy.value(obs)
+
+
+@pytest.fixture
+def setup(switching_library):
+    return load_switching(switching_library)
+
+
+def make_env(setup, worlds: int = 4, backend: str = "mujoco"):
+    sim = make_backend(backend, num_worlds=worlds)
+    cfg = EnvConfig(episode_seconds=100.0, randomization=RandomizationConfig(enabled=False))
+    return sim, setup.make_env(sim, cfg, seed=1)
+
+
+def test_actions_come_from_the_active_policy_only(setup) -> None:
+    sim, env = make_env(setup)
+    try:
+        policies = [Tagged(e.policy, tag=0.1 * (g + 1)) for g, e in enumerate(setup.entries)]
+        stand, trot = setup.gait_index("stand"), setup.gait_index("trot")
+        env.reset_worlds(torch.arange(4), gait=torch.tensor([trot, trot, stand, stand]))
+        ctl = MetaController(env, policies, ValueStrategy(threshold=-math.inf), typical_value=torch.ones(2))
+        ctl.request(torch.tensor([0]), stand)  # switches at once (threshold -inf)
+        for step in range(6):
+            before = env.gait.clone()
+            result = ctl.step()
+            switched = {e.world for e in result.events}
+            assert switched == ({0} if step == 0 else set())
+            expected = 0.1 * (before + 1)
+            expected[0] = 0.1 * (stand + 1)  # world 0 acts with its new policy from the switch on
+            assert torch.allclose(result.actions, expected.unsqueeze(1).expand(4, 12))
+        assert env.gait.tolist() == [stand, trot, stand, stand]
+    finally:
+        sim.close()
+
+
+def test_a_request_the_strategy_never_takes_is_forced_at_the_deadline(setup) -> None:
+    sim, env = make_env(setup, worlds=2)
+    try:
+        net = setup.resources.net
+        policies = [e.policy for e in setup.entries]
+        ctl = MetaController(env, policies, NetStrategy(net, threshold=1.01), deadline_s=0.5)  # never reached
+        trot, stand = setup.gait_index("trot"), setup.gait_index("stand")
+        env.reset_worlds(torch.arange(2), gait=torch.tensor([trot, trot]))
+        ctl.request(torch.tensor([1]), stand)
+        events = []
+        for _ in range(ctl.deadline_steps + 3):
+            result = ctl.step()
+            assert torch.isnan(result.best_score[0])  # world 0 waits for nothing
+            if result.waiting[1]:
+                assert 0.0 <= result.best_score[1] <= 1.0 and 0.0 <= result.best_phase[1] < 1.0
+            events += result.events
+        assert len(events) == 1
+        event = events[0]
+        assert event.world == 1 and event.forced and event.source == trot and event.dest == stand
+        assert event.step == ctl.deadline_steps == 15 and event.wait_s == pytest.approx(0.5)
+        assert env.gait[1] == stand and env.phase[1] >= 0
+    finally:
+        sim.close()
+
+
+def test_value_strategies_see_the_destination_critic_on_every_candidate(setup) -> None:
+    sim, env = make_env(setup, worlds=2)
+    try:
+        ctl = setup.controller(env, "tmt-value")
+        seen = []
+        decide = ctl.strategy.decide
+        ctl.strategy.decide = lambda query: seen.append(query) or decide(query)
+        ctl.request(torch.tensor([0, 1]), 1 - env.gait)
+        ctl.step()
+        query = seen[0]
+        assert query.dest_value.shape == (2, 16) and torch.isfinite(query.dest_value).all()
+        assert query.dest_value.std() > 0  # the candidates differ
+        assert query.latent.shape == (2, 16)
+    finally:
+        sim.close()
+
+
+@pytest.mark.parametrize("strategy", ["random", "value", "tmt", "tmt-value", "net"])
+def test_run_episode_records_the_switch(setup, strategy) -> None:
+    trace = run_episode(
+        setup, source="trot", dest="stand", strategy=strategy, request_s=0.3, seconds=1.2, deadline_s=0.5, seed=2
+    )
+    steps = len(trace.time_s)
+    assert trace.qpos.shape == (steps, 19) and trace.foot_contact.shape == (steps, 4)
+    if trace.switch is not None:
+        assert trace.switch_s >= 0.3 - 1e-9 and trace.switch.dest == setup.gait_index("stand")
+        assert trace.active[-1] == setup.gait_index("stand")
+    else:
+        assert trace.fell_s is not None and trace.fell_s <= 0.3 + 0.5 + trace.dt  # fell before the deadline
+
+
+@pytest.mark.newton
+def test_the_meta_controller_runs_on_newton(setup) -> None:
+    sim, env = make_env(setup, worlds=2, backend="newton")
+    try:
+        ctl = setup.controller(env, "net", deadline_s=0.2)
+        ctl.request(torch.tensor([0, 1]), 1 - env.gait)
+        events = []
+        for _ in range(8):
+            events += ctl.step().events
+        assert {e.world for e in events} == {0, 1}
+    finally:
+        sim.close()
