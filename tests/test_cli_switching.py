@@ -89,3 +89,14 @@ def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
     report = json.loads(result.stdout)
     assert report["switch_s"] is not None and report["stayed_up"] is True
     assert plot.is_file()
+
+
+def test_bench_collect_reports_a_ratio_against_the_environment_step(switching_library) -> None:
+    result = gaitlib(
+        "bench", "collect", "--worlds", "4", "--seconds", "1", "--library", str(switching_library), "--json"
+    )
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["env_steps_per_s"] > 0 and report["samples_per_s"] > 0 and report["steps_per_sample"] > 1
+    expected = report["samples_per_s"] * report["steps_per_sample"] / report["env_steps_per_s"]
+    assert report["ratio"] == pytest.approx(expected)

@@ -28,7 +28,7 @@ import torch
 
 from gaitlib.atomic import write_json
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import DEADLINE_S, SwitchingSetup
 from gaitlib.sim import make_backend, resolve_backend_name
@@ -69,7 +69,7 @@ class SweepConfig:
     """A request not acted on within this time is forced, s."""
     push_duration_s: tuple[float, float] = (0.1, 0.3)
     """Duration of each push, s (paper: 0.1-0.3 s)."""
-    push_interval_s: tuple[float, float] = (0.2, 1.0)
+    push_interval_s: tuple[float, float] = DISTURBANCE_INTERVAL_S
     """Quiet time before each push, from the request on, s."""
     backend: str = "auto"
     """Simulation backend."""

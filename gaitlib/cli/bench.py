@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import typer
 
@@ -43,4 +44,38 @@ def sim(
     table.add_row("MuJoCo C mj_step thread pool", f"{result.raw_mj_step_per_s:,.0f}")
     table.add_row("MuJoCo C rollout (chained)", f"{result.raw_rollout_per_s:,.0f}")
     table.add_row("ratio (backend / faster reference)", f"{result.ratio:.3f}")
+    Console().print(table)
+
+
+@app.command("collect")
+def collect_throughput(
+    worlds: int = typer.Option(256, "--worlds", help="Number of parallel worlds."),
+    seconds: float = typer.Option(60.0, "--seconds", help="Wall-clock seconds per measurement (three are made)."),
+    push_max: float = typer.Option(400.0, "--push-max", help="Largest push of the collection, N."),
+    backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+) -> None:
+    """Samples per second of gaitlib collect against what the environment step allows (goal: ratio >= 0.8)."""
+    from gaitlib.bench.collect_throughput import measure_collect_throughput
+    from gaitlib.training import default_library_dir
+
+    result = measure_collect_throughput(
+        library or default_library_dir(), worlds=worlds, seconds=seconds, push_max=push_max, backend=backend
+    )
+    if as_json:
+        print(json.dumps(result.as_dict()))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"collection throughput: {worlds} worlds, pushes up to {push_max:g} N")
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    table.add_row("policy rollout, control steps/s (reference)", f"{result.env_steps_per_s:,.0f}")
+    table.add_row("control steps per sample", f"{result.steps_per_sample:.1f}")
+    table.add_row("samples/s the environment step allows", f"{result.allowed_samples_per_s:.1f}")
+    table.add_row("samples/s collected", f"{result.samples_per_s:.1f}")
+    table.add_row("ratio", f"{result.ratio:.3f}")
+    table.add_row("time for 2e6 samples at this rate", f"{2e6 / result.samples_per_s / 3600:.1f} h")
     Console().print(table)

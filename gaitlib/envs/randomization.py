@@ -67,6 +67,11 @@ def sample_world_parameters(cfg: RandomizationConfig, k: int, generator: torch.G
     )
 
 
+DISTURBANCE_INTERVAL_S = (0.2, 1.0)
+"""Quiet time before each push where pushes test a switch (collection source runs, benchmark, ``gaitlib run``), s:
+short enough that a push or two lands in every transition window."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class PushConfig:
     """Random horizontal pushes on the trunk: random direction, magnitude, duration and interval."""

@@ -120,4 +120,3 @@ class ReferenceTracker:
                 out[rows] = getattr(frame, name)
             merged[name] = out
         return ClipFrame(**merged)
-

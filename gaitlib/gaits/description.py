@@ -65,8 +65,14 @@ class GaitDescription:
 
         if not isinstance(self.name, str) or not self.name:
             raise GaitError(f"gait name must be a non-empty string, got {self.name!r}")
-        for field in ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height",
-                      "foot_lateral_offset"):
+        for field in (
+            "duty_factor",
+            "stride_frequency",
+            "forward_speed",
+            "swing_height",
+            "body_height",
+            "foot_lateral_offset",
+        ):
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise fail(f"{field} must be a finite number, got {value!r}")

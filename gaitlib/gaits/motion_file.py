@@ -59,16 +59,22 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
         raise fail(f"LoopMode must be \"Wrap\" or \"Clamp\", got {data['LoopMode']!r}")
     loop = _LOOP_MODES[data["LoopMode"]]
     duration = data["FrameDuration"]
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
-            or duration <= 0.0:
+    if (
+        isinstance(duration, bool)
+        or not isinstance(duration, (int, float))
+        or not math.isfinite(duration)
+        or duration <= 0.0
+    ):
         raise fail(f"FrameDuration must be a positive number of seconds, got {duration!r}")
     frames = data["Frames"]
     least = 3 if loop else 2
     if not isinstance(frames, list) or len(frames) < least:
         raise fail(f"Frames must be a list of at least {least} frames for LoopMode {data['LoopMode']}")
     for index, frame in enumerate(frames):
-        if not isinstance(frame, list) or len(frame) != _FRAME_SIZE or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in frame
+        if (
+            not isinstance(frame, list)
+            or len(frame) != _FRAME_SIZE
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in frame)
         ):
             raise fail(f"frame {index} must be {_FRAME_SIZE} finite numbers (root xyz, quaternion xyzw, 12 joints)")
     table = np.asarray(frames, dtype=np.float64)

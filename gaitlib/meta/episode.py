@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.meta.controller import DEADLINE_S, SwitchEvent
 from gaitlib.meta.session import SwitchingSetup
 from gaitlib.sim import make_backend
@@ -75,7 +75,8 @@ def run_episode(
     seed: int = 0,
 ) -> RunTrace:
     """Run one robot on ``source``, request ``dest`` at ``request_s``, let ``strategy`` switch; pushes of ``push_n``
-    (random direction, 0.1-0.3 s, every 1-3 s) hit it from the request on. Stops at ``seconds`` or at a fall."""
+    (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit it from the request on. Stops at ``seconds``
+    or at a fall."""
     m, n = setup.gait_index(source), setup.gait_index(dest)
     if m == n:
         from gaitlib.errors import GaitlibError
@@ -85,7 +86,10 @@ def run_episode(
     try:
         env = setup.make_env(
             sim,
-            EnvConfig(episode_seconds=seconds + 1.0, pushes=PushConfig(max_force=push_n, fixed_force=True)),
+            EnvConfig(
+                episode_seconds=seconds + 1.0,
+                pushes=PushConfig(max_force=push_n, fixed_force=True, interval=DISTURBANCE_INTERVAL_S),
+            ),
             seed=seed,
         )
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)

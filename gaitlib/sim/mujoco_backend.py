@@ -26,6 +26,7 @@ __all__ = ["MujocoBackend", "load_model"]
 
 _log = logging.getLogger(__name__)
 
+
 def load_model(robot: RobotSpec) -> mujoco.MjModel:
     """Compile ``robot.mjcf_path`` and check it against the spec; raises :class:`SimulationError`."""
     try:

@@ -148,4 +148,3 @@ def rsl_rl_config(preset: TrainPreset) -> dict:
             "desired_kl": preset.desired_kl,
         },
     }
-

@@ -186,8 +186,14 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
             )
             _log(writer, stats)
             length = stats.mean_episode_length
-            curve.append([stats.iteration, round(elapsed, 1), round(stats.mean_reward, 4),
-                          None if math.isnan(length) else round(length, 2)])
+            curve.append(
+                [
+                    stats.iteration,
+                    round(elapsed, 1),
+                    round(stats.mean_reward, 4),
+                    None if math.isnan(length) else round(length, 2),
+                ]
+            )
             if on_iteration is not None:
                 on_iteration(stats)
             if completed % request.checkpoint_every == 0:
@@ -235,8 +241,10 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
             "seed": request.seed,
             "push_force_max_n": preset.push_force,
             "episode_seconds": preset.episode_seconds,
-            "curve": {"columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
-                      "rows": curve[:: max(1, len(curve) // 60)] + curve[-1:]},
+            "curve": {
+                "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
+                "rows": curve[:: max(1, len(curve) // 60)] + curve[-1:],
+            },
         },
         evaluation=evaluation.as_dict(),
     )

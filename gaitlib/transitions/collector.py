@@ -44,7 +44,7 @@ import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
-from gaitlib.envs.randomization import PushConfig, RandomizationConfig
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig, RandomizationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.library import LibraryEntry, load_entry
@@ -63,8 +63,8 @@ _PUSH_UNIT = 100.0
 
 @dataclass(frozen=True, kw_only=True)
 class CollectConfig:
-    """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``batch_size`` and ``device``
-    is stored in the file's settings, and a resumed collection must repeat it."""
+    """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``batch_size``, ``device`` and
+    ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it."""
 
     samples: int
     """Samples the file holds when collection ends (a resumed run continues up to this count)."""
@@ -80,7 +80,7 @@ class CollectConfig:
     """After a successful switch the destination becomes the next source without a reset (see the module doc)."""
     push_max: float = 0.0
     """Largest random push magnitude, N (uniform in [0, push_max]); 0 disables pushes."""
-    push_interval_s: tuple[float, float] = (0.2, 1.0)
+    push_interval_s: tuple[float, float] = DISTURBANCE_INTERVAL_S
     """Quiet time between pushes while the source runs, s (uniform in this range)."""
     pairs: tuple[tuple[str, str], ...] | None = None
     """Ordered (source, destination) gait pairs to sample, uniformly; ``None``: every ordered pair of ``gaits``."""
@@ -92,6 +92,9 @@ class CollectConfig:
     """Base seed; each run of a resumed file derives its own streams from it and the file's next chunk index."""
     batch_size: int = 256
     """Finished samples gathered before a write (one chunk) and a progress report."""
+    time_limit_s: float | None = None
+    """Stop after the first write past this much wall-clock time, s (``None``: run until ``samples``); a rerun
+    resumes."""
 
 
 @dataclass(frozen=True)
@@ -253,6 +256,8 @@ def collect(
                                     steps_per_sample=run.world_steps / max(written, 1),
                                 )
                             )
+                        if cfg.time_limit_s is not None and time.perf_counter() - start >= cfg.time_limit_s:
+                            break
         except KeyboardInterrupt:
             write()  # finished samples still in memory
             raise

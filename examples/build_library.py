@@ -1,0 +1,58 @@
+"""Build a complete gait library from gait descriptions: train each gait, collect switch samples, fit the
+transition-net and the TMT. The result is a library folder that ``gaitlib run --library DIR`` can use.
+
+    python examples/build_library.py --minutes 20 --samples 20000     # about 1.5 h on a 2-core CPU
+    python examples/build_library.py --minutes 0.5 --samples 500      # a smoke run of a few minutes
+
+The shipped ``library/`` was built the same way with the CLI (see docs/results.md for its sizes).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gaitlib.gaits import get_gait
+from gaitlib.strategies import build_table, save_table
+from gaitlib.training import get_preset, load_entry
+from gaitlib.training.trainer import TrainRequest, train_gait
+from gaitlib.transition_net import FitConfig, fit, save_net
+from gaitlib.transitions import CollectConfig, collect, read
+
+GAITS = ("pace", "stand", "trot")  # shipped descriptions (gaitlib/gaits/descriptions/*.toml)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=20.0, help="training time per gait")
+    parser.add_argument("--samples", type=int, default=20_000, help="transition samples to collect")
+    parser.add_argument("--library", type=Path, default=Path("examples_library"))
+    args = parser.parse_args()
+
+    for gait in GAITS:  # each gait is trained alone: adding one never touches the others
+        result = train_gait(
+            TrainRequest(
+                description=get_gait(gait),
+                preset=get_preset("cpu"),
+                iterations=10**6,
+                time_limit_s=60 * args.minutes,
+                library=args.library,
+                run_dir=Path("runs") / "examples" / gait,
+                eval_episodes=32,
+            )
+        )
+        print(f"{gait}: fall rate {result.evaluation.fall_rate:.2f} after {args.minutes:g} min")
+
+    data = Path("data") / "examples_transitions.h5"  # rerunning resumes the collection
+    collect(data, library=args.library, gaits=sorted(GAITS), config=CollectConfig(samples=args.samples, push_max=400))
+    samples = read(data)
+    fitted = fit(samples, FitConfig())
+    save_net(args.library / "transition_net" / "net.pt", fitted)
+    identities = {g: load_entry(args.library, g).identity for g in GAITS}
+    save_table(args.library / "tmt" / "tmt.json", build_table(samples, identities=identities, source=str(data)))
+    for (m, n), accuracy in fitted.validation_accuracy.items():
+        print(f"transition-net {m}->{n}: {100 * accuracy:.1f}% balanced validation accuracy")
+
+
+if __name__ == "__main__":
+    main()

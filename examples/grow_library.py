@@ -1,0 +1,65 @@
+"""Add a gait to an existing library and extend the transition data: train the new gait alone, collect only the
+pairs that involve it, and refit the transition-net and TMT on the old and the new samples together. No existing
+policy is retrained or changed.
+
+    python examples/grow_library.py --library examples_library --old-data data/examples_transitions.h5
+
+(build ``examples_library`` first with ``examples/build_library.py``; the shipped ``library/`` can be grown the
+same way, into a copy.)
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gaitlib.gaits import get_gait
+from gaitlib.strategies import build_table, save_table
+from gaitlib.training import get_preset, load_entry
+from gaitlib.training.library import entry_names
+from gaitlib.training.trainer import TrainRequest, train_gait
+from gaitlib.transition_net import FitConfig, fit, save_net
+from gaitlib.transitions import CollectConfig, collect, read_all
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--library", type=Path, required=True)
+    parser.add_argument("--old-data", type=Path, required=True, help="the transition file(s) of the library")
+    parser.add_argument("--gait", default="bound", help="a shipped gait description to add")
+    parser.add_argument("--minutes", type=float, default=20.0)
+    parser.add_argument("--samples", type=int, default=20_000)
+    args = parser.parse_args()
+
+    before = {g: load_entry(args.library, g).identity for g in entry_names(args.library)}
+    train_gait(
+        TrainRequest(
+            description=get_gait(args.gait),
+            preset=get_preset("cpu"),
+            iterations=10**6,
+            time_limit_s=60 * args.minutes,
+            library=args.library,
+            run_dir=Path("runs") / "examples" / args.gait,
+            eval_episodes=32,
+        )
+    )
+    gaits = entry_names(args.library)
+    assert all(load_entry(args.library, g).identity == i for g, i in before.items())  # old policies untouched
+
+    new_pairs = tuple((m, n) for m in gaits for n in gaits if m != n and args.gait in (m, n))
+    new_data = args.old_data.with_name(f"{args.old_data.stem}_{args.gait}.h5")
+    collect(
+        new_data, library=args.library, gaits=gaits,
+        config=CollectConfig(samples=args.samples, push_max=400, pairs=new_pairs),
+    )
+    samples = read_all([args.old_data, new_data])  # merged by gait name
+    fitted = fit(samples, FitConfig())
+    save_net(args.library / "transition_net" / "net.pt", fitted)
+    identities = dict(zip(samples.header.gaits, samples.header.identities, strict=True))
+    save_table(args.library / "tmt" / "tmt.json", build_table(samples, identities=identities, source="old + new"))
+    for (m, n), accuracy in sorted(fitted.validation_accuracy.items()):
+        print(f"{m}->{n}: {100 * accuracy:.1f}%")
+
+
+if __name__ == "__main__":
+    main()
