@@ -10,7 +10,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_json"]
+__all__ = ["atomic_path", "save_figure", "write_json"]
 
 
 def _umask() -> int:
@@ -43,4 +43,16 @@ def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:
         with open(tmp, "w") as handle:
             json.dump(payload, handle, indent=indent)
             handle.write("\n")
+    return Path(path)
+
+
+def save_figure(fig, path: Path, *, dpi: int = 110) -> Path:
+    """Save the matplotlib figure ``fig`` as a PNG at ``path`` atomically, then close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
     return Path(path)

@@ -4,21 +4,12 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 
 import pytest
+from cli_runner import gaitlib
 
 EXPECTED_KEYS = {"backend", "worlds", "control_hz", "substeps", "env_steps_per_s", "raw_steps_per_s", "ratio"}
 
-
-def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
 
 
 def test_bench_sim_prints_one_json_object() -> None:

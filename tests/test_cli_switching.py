@@ -3,22 +3,13 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import gaitlib
 
 SHIPPED = Path(__file__).resolve().parents[1] / "library"
 
-
-def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
 
 
 def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path) -> None:

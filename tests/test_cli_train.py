@@ -6,14 +6,7 @@ import json
 import subprocess
 import sys
 
-
-def gaitlib(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
+from cli_runner import gaitlib
 
 
 def test_train_then_eval_json(tmp_path) -> None:

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import subprocess
-import sys
 
 import h5py
 import pytest
+from cli_runner import gaitlib
 
 from gaitlib.cli.options import parse_pairs
 from gaitlib.gaits import get_gait
@@ -22,14 +21,6 @@ TINY = dataclasses.replace(
 )
 QUICK = ["--worlds", "4", "--horizon", "1.5", "--push-max", "400", "--backend", "mujoco"]
 
-
-def gaitlib(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
 
 
 @pytest.fixture(scope="module")

@@ -57,8 +57,13 @@ def measure_collect_throughput(
     setup = load_switching(library)
     reference = [_rollout_steps_per_s(setup, worlds, seconds, push_max, backend)]
     with tempfile.TemporaryDirectory() as scratch:
-        config = CollectConfig(
-            samples=10**9, num_worlds=worlds, push_max=push_max, backend=backend, time_limit_s=seconds
+        config = CollectConfig(  # a write (and a look at the clock) per batch of as many samples as worlds
+            samples=10**9,
+            num_worlds=worlds,
+            push_max=push_max,
+            backend=backend,
+            batch_size=worlds,
+            time_limit_s=seconds,
         )
         result = collect(Path(scratch) / "bench.h5", library=library, gaits=list(setup.gaits), config=config)
     reference.append(_rollout_steps_per_s(setup, worlds, seconds, push_max, backend))

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import atomic_path, save_figure
 
 __all__ = ["CellResult", "cell_results", "success_table", "summary", "wilson_interval", "write_csv", "write_plot"]
 
@@ -151,9 +151,4 @@ def write_plot(path: Path, rows: list[CellResult], *, title: str = "") -> Path:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=110, format="png")
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import save_figure
 from gaitlib.meta.episode import RunTrace
 
 __all__ = ["plot_trace"]
@@ -66,9 +66,4 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
         fontsize=10,
     )
     fig.tight_layout()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=110, format="png")
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path)
