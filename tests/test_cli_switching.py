@@ -72,8 +72,8 @@ def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:
     assert result.returncode == 2 and "--magnitudes" in result.stderr.strip().splitlines()[0]
 
 
-@pytest.mark.skipif(not (SHIPPED / "transition_net" / "net.pt").is_file(), reason="no shipped transition-net yet")
 def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
+    assert (SHIPPED / "transition_net" / "net.pt").is_file() and (SHIPPED / "tmt" / "tmt.json").is_file()
     plot = tmp_path / "run.png"
     result = gaitlib("run", "--from", "trot", "--to", "stand", "--plot", str(plot), "--json")
     assert result.returncode == 0, result.stderr

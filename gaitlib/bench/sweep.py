@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from gaitlib.atomic import write_json
@@ -76,7 +77,7 @@ class SweepConfig:
     device: str | None = None
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
-    """Base seed; each group derives its own from it, the strategy and the magnitude."""
+    """Base seed; each magnitude derives its own from it (the same for every strategy)."""
 
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat."""
@@ -204,7 +205,9 @@ def _run_group(
     report: Callable[[int], None],
 ) -> dict[tuple[str, str], CellCounts]:
     """All transitions of one strategy at one push magnitude."""
-    seed = int.from_bytes(f"{cfg.seed}/{strategy}/{magnitude:g}".encode(), "little") % (2**31)
+    # Every strategy meets the same random draws at a magnitude (common random numbers: differences between
+    # strategies are not blurred by different worlds), and each magnitude its own.
+    seed = int(np.random.SeedSequence([cfg.seed, round(magnitude * 1000)]).generate_state(1)[0])
     sim = make_backend(cfg.backend, num_worlds=cfg.num_worlds, device=cfg.device)
     try:
         pushes = PushConfig(

@@ -60,7 +60,7 @@ def run_command(
         "request_s": request_at,
         "switch_s": trace.switch_s,
         "wait_s": None if event is None else event.wait_s,
-        "score": None if event is None else event.score,
+        "score": None if event is None or event.score != event.score else event.score,  # NaN (random): null
         "phase": None if event is None else event.phase,
         "forced": None if event is None else event.forced,
         "stayed_up": trace.stayed_up,
@@ -75,6 +75,8 @@ def run_command(
         switched = "no switch happened"
     else:
         how = "forced by the deadline" if event.forced else f"score {event.score:.3f}"
+        if event.score != event.score:  # NaN: random has no score
+            how = "random: no score"
         switched = (
             f"switched at {trace.switch_s:.2f} s after waiting {event.wait_s:.2f} s ({how}, φn = {event.phase:.3f})"
         )
@@ -127,8 +129,13 @@ def benchmark_command(
     with job_progress(console, "benchmark") as progress:
         task = progress.add_task("benchmark", total=total, status="starting")
 
+        last = [""]
+
         def show(group: str, done: int, total: int) -> None:
             progress.update(task, completed=done, status=group)
+            if not console.is_terminal and group != last[0]:  # logs get a line per group
+                console.print(f"{done}/{total} transitions, now {group}")
+                last[0] = group
 
         results = run_sweep(out, setup, config, progress=show)
     rows = cell_results(results)
