@@ -9,7 +9,7 @@ from pathlib import Path
 import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
-from gaitlib.errors import GaitlibError
+from gaitlib.errors import GaitlibError, UnknownNameError
 from gaitlib.meta.controller import DEADLINE_S, MetaController
 from gaitlib.sim import SimBackend
 from gaitlib.strategies import SwitchResources, get_strategy
@@ -34,8 +34,6 @@ class SwitchingSetup:
     def gait_index(self, name: str) -> int:
         """Index of gait ``name``; :class:`UnknownNameError` for a gait the library lacks."""
         if name not in self.gaits:
-            from gaitlib.errors import UnknownNameError
-
             raise UnknownNameError("gait", name, list(self.gaits))
         return self.gaits.index(name)
 
