@@ -17,8 +17,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--library", type=Path, default=default_library_dir())
     args = parser.parse_args()
-    metas = {name: json.loads((args.library / name / "metadata.json").read_text()) for name in entry_names(args.library)}
-    print("| gait | training time (min) | iterations | samples | fall rate | joint RMSE (rad) | speed (m/s) | reference (m/s) | episodes |")
+    names = entry_names(args.library)
+    metas = {name: json.loads((args.library / name / "metadata.json").read_text()) for name in names}
+    columns = "training time (min) | iterations | samples | fall rate | joint RMSE (rad) | speed (m/s) | reference"
+    print(f"| gait | {columns} (m/s) | episodes |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, meta in metas.items():
         t, e = meta["training"], meta["evaluation"]

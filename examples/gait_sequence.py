@@ -41,8 +41,10 @@ def main() -> None:
                 step, since_switch = step + 1, since_switch + 1
                 for event in result.events:
                     how = "forced" if event.forced else f"score {event.score:.3f}"
-                    print(f"{step * env.dt:6.2f} s  switched {setup.gaits[event.source]} -> {setup.gaits[event.dest]}"
-                          f" at phase {event.phase:.2f} after {event.wait_s:.2f} s ({how})")
+                    print(
+                        f"{step * env.dt:6.2f} s  switched {setup.gaits[event.source]} -> {setup.gaits[event.dest]}"
+                        f" at phase {event.phase:.2f} after {event.wait_s:.2f} s ({how})"
+                    )
                     since_switch = 0
                 if result.fell[0]:
                     raise SystemExit(f"{step * env.dt:6.2f} s  the robot fell")

@@ -49,7 +49,9 @@ def main() -> None:
     new_pairs = tuple((m, n) for m in gaits for n in gaits if m != n and args.gait in (m, n))
     new_data = args.old_data.with_name(f"{args.old_data.stem}_{args.gait}.h5")
     collect(
-        new_data, library=args.library, gaits=gaits,
+        new_data,
+        library=args.library,
+        gaits=gaits,
         config=CollectConfig(samples=args.samples, push_max=400, pairs=new_pairs),
     )
     samples = read_all([args.old_data, new_data])  # merged by gait name

@@ -56,7 +56,7 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
     if missing:
         raise fail(f"missing key(s) {', '.join(missing)}")
     if data["LoopMode"] not in _LOOP_MODES:
-        raise fail(f"LoopMode must be \"Wrap\" or \"Clamp\", got {data['LoopMode']!r}")
+        raise fail(f'LoopMode must be "Wrap" or "Clamp", got {data["LoopMode"]!r}')
     loop = _LOOP_MODES[data["LoopMode"]]
     duration = data["FrameDuration"]
     if (
