@@ -8,6 +8,8 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.tables import print_measures
+
 __all__ = ["app"]
 
 app = typer.Typer(help="Throughput benchmarks (ratios against plain MuJoCo C measured in the same run).")
@@ -34,17 +36,16 @@ def sim(
     if as_json:
         print(json.dumps(result.as_dict()))
         return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"sim throughput: {result.backend} on {result.device}, {result.worlds} worlds")
-    table.add_column("measure")
-    table.add_column("control steps/s", justify="right")
-    table.add_row(f"gaitlib {result.backend} backend", f"{result.env_steps_per_s:,.0f}")
-    table.add_row("MuJoCo C mj_step thread pool", f"{result.raw_mj_step_per_s:,.0f}")
-    table.add_row("MuJoCo C rollout (chained)", f"{result.raw_rollout_per_s:,.0f}")
-    table.add_row("ratio (backend / faster reference)", f"{result.ratio:.3f}")
-    Console().print(table)
+    print_measures(
+        f"sim throughput: {result.backend} on {result.device}, {result.worlds} worlds",
+        [
+            (f"gaitlib {result.backend} backend", f"{result.env_steps_per_s:,.0f}"),
+            ("MuJoCo C mj_step thread pool", f"{result.raw_mj_step_per_s:,.0f}"),
+            ("MuJoCo C rollout (chained)", f"{result.raw_rollout_per_s:,.0f}"),
+            ("ratio (backend / faster reference)", f"{result.ratio:.3f}"),
+        ],
+        header=("measure", "control steps/s"),
+    )
 
 
 @app.command("collect")
@@ -66,16 +67,14 @@ def collect_throughput(
     if as_json:
         print(json.dumps(result.as_dict()))
         return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"collection throughput: {worlds} worlds, pushes up to {push_max:g} N")
-    table.add_column("measure")
-    table.add_column("value", justify="right")
-    table.add_row("policy rollout, control steps/s (reference)", f"{result.env_steps_per_s:,.0f}")
-    table.add_row("control steps per sample", f"{result.steps_per_sample:.1f}")
-    table.add_row("samples/s the environment step allows", f"{result.allowed_samples_per_s:.1f}")
-    table.add_row("samples/s collected", f"{result.samples_per_s:.1f}")
-    table.add_row("ratio", f"{result.ratio:.3f}")
-    table.add_row("time for 2e6 samples at this rate", f"{2e6 / result.samples_per_s / 3600:.1f} h")
-    Console().print(table)
+    print_measures(
+        f"collection throughput: {worlds} worlds, pushes up to {push_max:g} N",
+        [
+            ("policy rollout, control steps/s (reference)", f"{result.env_steps_per_s:,.0f}"),
+            ("control steps per sample", f"{result.steps_per_sample:.1f}"),
+            ("samples/s the environment step allows", f"{result.allowed_samples_per_s:.1f}"),
+            ("samples/s collected", f"{result.samples_per_s:.1f}"),
+            ("ratio", f"{result.ratio:.3f}"),
+            ("time for 2e6 samples at this rate", f"{2e6 / result.samples_per_s / 3600:.1f} h"),
+        ],
+    )

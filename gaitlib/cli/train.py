@@ -8,6 +8,8 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.tables import print_measures
+
 __all__ = ["eval_command", "train_command"]
 
 
@@ -117,18 +119,15 @@ def eval_command(
     if as_json:
         print(json.dumps({"gait": gait} | result.as_dict()))
         return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(
-        title=f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N"
+    print_measures(
+        f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N",
+        [
+            ("fall rate", f"{result.fall_rate:.3f}"),
+            ("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}"),
+            ("forward speed (m/s)", f"{result.forward_speed:.3f}"),
+            ("reference speed (m/s)", f"{result.reference_speed:.3f}"),
+            ("speed error", f"{result.speed_error:.3f}"),
+            ("mean episode length (s)", f"{result.mean_episode_seconds:.2f}"),
+        ],
+        header=("metric", "value"),
     )
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    table.add_row("fall rate", f"{result.fall_rate:.3f}")
-    table.add_row("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}")
-    table.add_row("forward speed (m/s)", f"{result.forward_speed:.3f}")
-    table.add_row("reference speed (m/s)", f"{result.reference_speed:.3f}")
-    table.add_row("speed error", f"{result.speed_error:.3f}")
-    table.add_row("mean episode length (s)", f"{result.mean_episode_seconds:.2f}")
-    Console().print(table)
