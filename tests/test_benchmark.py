@@ -23,6 +23,7 @@ TINY = SweepConfig(
     source_extra_s=0.2,
     horizon_s=0.5,
     deadline_s=0.3,
+    push_lead_s=0.2,
     backend="mujoco",
 )
 

@@ -4,16 +4,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import RandomizationConfig
+from gaitlib.envs.randomization import DISTURBANCE_LEAD_S, RandomizationConfig
 from gaitlib.meta import MetaController, load_switching
 from gaitlib.meta.episode import run_episode
 from gaitlib.sim import make_backend
 from gaitlib.strategies.net import NetStrategy
 from gaitlib.strategies.value import ValueStrategy
+from gaitlib.training import default_library_dir
 
 
 class Tagged(torch.nn.Module):
@@ -119,6 +121,27 @@ def test_run_episode_records_the_switch(setup, strategy) -> None:
         assert trace.active[-1] == setup.gait_index("stand")
     else:
         assert trace.fell_s is not None and trace.fell_s <= 0.3 + 0.5 + trace.dt  # fell before the deadline
+
+
+def test_pushes_hit_only_inside_the_disturbance_window() -> None:
+    request_s, deadline_s = 1.0, 0.5
+    trace = run_episode(
+        load_switching(default_library_dir()),  # trained policies: the robot outlives the window
+        source="stand",
+        dest="trot",
+        strategy="net",
+        request_s=request_s,
+        push_n=40.0,
+        seconds=3.5,  # a push would start again within 1 s of the window's end (the longest quiet time)
+        deadline_s=deadline_s,
+        seed=3,
+    )
+    assert trace.stayed_up and trace.time_s[-1] > request_s + deadline_s + 0.5
+    pushed = trace.time_s[trace.push > 0]
+    assert len(pushed) and set(np.round(trace.push[trace.push > 0], 3)) == {40.0}  # fixed magnitude
+    longest_push = 0.3
+    assert pushed.min() > request_s - DISTURBANCE_LEAD_S
+    assert pushed.max() <= request_s + deadline_s + longest_push + trace.dt  # the last push runs out
 
 
 @pytest.mark.newton

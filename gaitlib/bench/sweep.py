@@ -4,12 +4,16 @@ magnitude, 0 to 500 N, and the success rate of each (strategy, pair, magnitude) 
 One transition, per world, all worlds at once (a group = one strategy at one magnitude, its pairs interleaved):
 
 1. reset with the source gait m of the least-served pair (reference state initialization, Table 1 randomization);
-2. the meta-controller runs m for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``], no pushes
-   (a fall here is a source fall: the world starts again at 1 with the same pair, nothing is counted);
-3. the switch to n is requested, and from then on pushes of the group's magnitude (random horizontal direction,
-   ``push_duration_s``, a quiet time in ``push_interval_s`` before each) hit the trunk; the strategy switches
-   when it says so, or the request is forced after ``deadline_s``;
-4. success if the robot does not fall from the request until ``horizon_s`` after the switch.
+2. the meta-controller runs m for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``]; for the last
+   ``push_lead_s`` of it, pushes of the group's magnitude (random horizontal direction, ``push_duration_s``, a
+   quiet time in ``push_interval_s`` before each) hit the trunk (a fall before the request is a source fall: the
+   world starts again at 1 with the same pair, nothing is counted);
+3. the switch to n is requested; the strategy switches when it says so, or the request is forced after
+   ``deadline_s``; the pushes go on until ``deadline_s`` after the request, whatever the strategy does (the last
+   one runs out), so every strategy meets the same disturbance window and differs only in when and to which
+   phase it switches;
+4. success if the robot does not fall from the request until ``horizon_s`` after the switch (which always covers
+   the whole disturbance window).
 
 Results are written to ``OUT/results.json`` (atomically) after each group; a rerun with the same settings skips
 the finished groups, so an interrupted sweep loses at most the group under way.
@@ -29,7 +33,7 @@ import torch
 
 from gaitlib.atomic import write_json
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import DEADLINE_S, SwitchingSetup
 from gaitlib.sim import make_backend, resolve_backend_name
@@ -37,7 +41,7 @@ from gaitlib.sim import make_backend, resolve_backend_name
 __all__ = ["FORMAT_NAME", "CellCounts", "SweepConfig", "default_magnitudes", "group_key", "load_results", "run_sweep"]
 
 FORMAT_NAME = "gaitlib.benchmark"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: pushes from push_lead_s before the request until deadline_s after it
 _EPISODE_SECONDS = 1e6  # no time-outs: worlds are reset after each transition
 
 
@@ -71,7 +75,9 @@ class SweepConfig:
     push_duration_s: tuple[float, float] = (0.1, 0.3)
     """Duration of each push, s (paper: 0.1-0.3 s)."""
     push_interval_s: tuple[float, float] = DISTURBANCE_INTERVAL_S
-    """Quiet time before each push, from the request on, s."""
+    """Quiet time before each push, s."""
+    push_lead_s: float = DISTURBANCE_LEAD_S
+    """Pushes begin this long before the request (shorter than ``warmup_s``) and end ``deadline_s`` after it, s."""
     backend: str = "auto"
     """Simulation backend."""
     device: str | None = None
@@ -187,6 +193,8 @@ def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
         raise GaitlibError("give at least one strategy and one magnitude")
     if any(m < 0 for m in cfg.magnitudes):
         raise GaitlibError("push magnitudes must not be negative")
+    if not 0 <= cfg.push_lead_s < cfg.warmup_s:
+        raise GaitlibError("the push lead must lie in [0, warm-up time)")
     if cfg.pairs is None:
         return list(itertools.permutations(setup.gaits, 2))
     for m, n in cfg.pairs:
@@ -241,7 +249,9 @@ class _Group:
         self.warmup = round(cfg.warmup_s / env.dt)
         self.extra = round(cfg.source_extra_s / env.dt)
         self.horizon = max(1, round(cfg.horizon_s / env.dt))
-        env.enable_pushes(torch.arange(n, device=dev), False)
+        self.lead = round(cfg.push_lead_s / env.dt)
+        self.push_steps = self.lead + round(cfg.deadline_s / env.dt)
+        self.push_left = torch.zeros(n, dtype=torch.long, device=dev)  # control steps of pushes left per world
         self._begin(torch.arange(n, device=dev))
 
     def run(self) -> dict[tuple[str, str], CellCounts]:
@@ -252,6 +262,7 @@ class _Group:
     def step(self) -> None:
         result = self.ctl.step()
         self.steps_left -= 1
+        self.push_left -= 1
         for event in result.events:
             w = event.world
             if int(self.stage[w]) != self.WAITING:
@@ -269,6 +280,8 @@ class _Group:
         failed = fell & ((self.stage == self.WAITING) | (self.stage == self.AFTER))
         succeeded = ~fell & (self.stage == self.AFTER) & (self.steps_left <= 0)
         due = ~fell & (self.stage == self.SOURCE) & (self.steps_left <= 0)
+        pushed = ~fell & (self.stage == self.SOURCE) & (self.steps_left == self.lead)
+        calmed = ~fell & (self.stage != self.SOURCE) & (self.push_left == 0)
         for mask, ok in ((failed, False), (succeeded, True)):
             for w in mask.nonzero().squeeze(1).tolist():
                 cell = self.cells[self.pairs[int(self.pair[w])]]
@@ -282,13 +295,16 @@ class _Group:
         ended = failed | succeeded
         if ended.any():
             ids = ended.nonzero().squeeze(1)
-            self.env.enable_pushes(ids, False)
             self.ctl.cancel(ids)
             self._begin(ids)
+        if pushed.any():
+            self.env.enable_pushes(pushed.nonzero().squeeze(1), True)
+            self.push_left[pushed] = self.push_steps
+        if calmed.any():
+            self.env.enable_pushes(calmed.nonzero().squeeze(1), False)
         if due.any():
             ids = due.nonzero().squeeze(1)
             self.ctl.request(ids, self.dest[self.pair[ids]])
-            self.env.enable_pushes(ids, True)
             self.stage[ids] = self.WAITING
 
     def _begin(self, ids: torch.Tensor) -> None:
@@ -298,6 +314,7 @@ class _Group:
             open_pairs = [i for i, s in enumerate(self.started) if s < self.cfg.samples]
             if not open_pairs:
                 self.stage[w] = self.IDLE
+                self.env.enable_pushes(torch.tensor([w], device=self.env.device), False)
                 continue
             chosen = min(open_pairs, key=lambda i: self.started[i])
             self.started[chosen] += 1
@@ -307,6 +324,7 @@ class _Group:
             self._start_source(torch.tensor(starting, dtype=torch.long, device=self.env.device))
 
     def _start_source(self, ids: torch.Tensor) -> None:
+        self.env.enable_pushes(ids, False)
         self.env.reset_worlds(ids, gait=self.source[self.pair[ids]])
         self.stage[ids] = self.SOURCE
         extra = torch.randint(self.extra + 1, (len(ids),), generator=self.gen).to(self.env.device)

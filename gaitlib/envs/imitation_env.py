@@ -187,6 +187,11 @@ class ImitationEnv(VecEnv):
         )
         return self._observations(preview, rows)
 
+    @property
+    def push_force(self) -> torch.Tensor:
+        """(N, 3) the push force currently applied to each trunk, world frame, N."""
+        return self._pushes.force.to(self.device)
+
     def enable_pushes(self, world_ids: torch.Tensor, enabled: bool) -> None:
         """Let random pushes hit worlds ``world_ids`` (the first after a fresh quiet time), or start no new push on
         them (a push under way runs out). Worlds start enabled; a reset keeps the setting."""
@@ -281,7 +286,7 @@ class ImitationEnv(VecEnv):
             s.root_pos[ids, 2],
             reference.wrapped_phase,
             self._dynamics[ids],
-            self._pushes.force.to(self.device)[ids],
+            self.push_force[ids],
         )
         return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[len(actor)])
 

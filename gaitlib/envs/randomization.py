@@ -71,6 +71,11 @@ DISTURBANCE_INTERVAL_S = (0.2, 1.0)
 """Quiet time before each push where pushes test a switch (collection source runs, benchmark, ``gaitlib run``), s:
 short enough that a push or two lands in every transition window."""
 
+DISTURBANCE_LEAD_S = 0.6
+"""Where pushes test a requested switch (benchmark, ``gaitlib run``), they begin this long before the request, s:
+the mean of :data:`DISTURBANCE_INTERVAL_S`, so the first push starts between 0.4 s before and 0.4 s after the
+request and a strategy meets the robot in every state of a push (under way, just over, about to come)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class PushConfig:

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.meta.controller import DEADLINE_S, SwitchEvent
 from gaitlib.meta.session import SwitchingSetup
 from gaitlib.sim import make_backend
@@ -31,7 +31,7 @@ class RunTrace:
     request_s: float
     """When the switch was requested, s."""
     push_n: float
-    """Push magnitude from the request on, N (0: none)."""
+    """Push magnitude, N (0: none): pushes hit from ``DISTURBANCE_LEAD_S`` before the request until the deadline."""
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) time at the end of each step, s."""
     active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -42,6 +42,8 @@ class RunTrace:
     """(T,) the best candidate destination phase while the request waited, cycles (NaN otherwise)."""
     root_height: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) trunk height, m."""
+    push: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) magnitude of the push on the trunk during each step, N."""
     foot_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=bool))
     """(T, 4) foot contacts (FR, FL, RR, RL)."""
     qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 19)))
@@ -75,8 +77,8 @@ def run_episode(
     seed: int = 0,
 ) -> RunTrace:
     """Run one robot on ``source``, request ``dest`` at ``request_s``, let ``strategy`` switch; pushes of ``push_n``
-    (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit it from the request on. Stops at ``seconds``
-    or at a fall."""
+    (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit it from ``DISTURBANCE_LEAD_S`` before the
+    request until ``deadline_s`` after it (the benchmark's window). Stops at ``seconds`` or at a fall."""
     m, n = setup.gait_index(source), setup.gait_index(dest)
     if m == n:
         from gaitlib.errors import GaitlibError
@@ -109,14 +111,21 @@ def run_episode(
             request_s=request_s,
             push_n=push_n,
         )
-        rows: dict[str, list] = {k: [] for k in ("time", "active", "score", "phase", "height", "contact", "qpos")}
+        names = ("time", "active", "score", "phase", "height", "push", "contact", "qpos")
+        rows: dict[str, list] = {k: [] for k in names}
         request_step = round(request_s / env.dt)
+        push_start = max(0, request_step - round(DISTURBANCE_LEAD_S / env.dt))
+        push_end = request_step + round(deadline_s / env.dt)
         for step in range(round(seconds / env.dt)):
+            if step == push_start:
+                env.enable_pushes(world, push_n > 0)
+            if step == push_end:
+                env.enable_pushes(world, False)
             if step == request_step:
                 ctl.request(world, n)
-                env.enable_pushes(world, push_n > 0)
             active = int(env.gait[0])
             result = ctl.step()
+            push = float(env.push_force[0].norm())
             if result.events:
                 trace.switch = result.events[0]
             if bool(result.fell[0]):
@@ -128,6 +137,7 @@ def run_episode(
             rows["score"].append(float(result.best_score[0]))
             rows["phase"].append(float(result.best_phase[0]))
             rows["height"].append(float(s.root_pos[0, 2]))
+            rows["push"].append(push)
             rows["contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
             rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
         trace.time_s = np.asarray(rows["time"])
@@ -135,6 +145,7 @@ def run_episode(
         trace.score = np.asarray(rows["score"])
         trace.best_phase = np.asarray(rows["phase"])
         trace.root_height = np.asarray(rows["height"])
+        trace.push = np.asarray(rows["push"])
         trace.foot_contact = np.asarray(rows["contact"], dtype=bool).reshape(-1, 4)
         trace.qpos = np.asarray(rows["qpos"]).reshape(len(rows["qpos"]), -1)
         return trace

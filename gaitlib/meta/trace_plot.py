@@ -16,8 +16,8 @@ _FEET = ("FR", "FL", "RR", "RL")
 
 def plot_trace(trace: RunTrace, path: Path) -> Path:
     """Write ``trace`` as a three-panel PNG (atomically): the strategy's best score and its destination phase
-    while the request waits (threshold dashed), trunk height, and the gait diagram (feet in contact, dark) with
-    the request and the switch marked."""
+    while the request waits (threshold dashed), trunk height with the pushes shaded, and the gait diagram (feet in
+    contact, dark) with the request and the switch marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -28,7 +28,7 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     fig, (ax_score, ax_height, ax_feet) = plt.subplots(
         3, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1.3, 1.2]}
     )
-    ax_score.plot(t, trace.score, color="tab:blue", label="best score")
+    ax_score.plot(t, trace.score, ".-", color="tab:blue", markersize=3, label="best score")  # a 1-step wait shows
     if trace.threshold is not None and np.isfinite(trace.threshold):
         ax_score.axhline(trace.threshold, color="tab:blue", linestyle="--", linewidth=1, label="threshold")
     ax_score.set_ylabel(f"{trace.strategy} score")
@@ -39,6 +39,10 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     ax_score.legend(loc="upper left", fontsize=8)
     ax_height.plot(t, trace.root_height, color="black")
     ax_height.set_ylabel("trunk height (m)")
+    if trace.push.any():
+        pushed = dict(where=trace.push > 0, step="pre", color="tab:red", alpha=0.2)
+        ax_height.fill_between(t, 0, 1, transform=ax_height.get_xaxis_transform(), label="push", **pushed)
+        ax_height.legend(loc="upper left", fontsize=8)
     contact = trace.foot_contact.T.astype(float)
     if len(t):
         ax_feet.imshow(
