@@ -9,7 +9,15 @@ import json
 import pytest
 
 from gaitlib.bench.sweep import SweepConfig, load_results, run_sweep
-from gaitlib.bench.sweep_report import cell_results, success_table, summary, wilson_interval, write_csv, write_plot
+from gaitlib.bench.sweep_report import (
+    CellResult,
+    cell_results,
+    success_table,
+    summary,
+    wilson_interval,
+    write_csv,
+    write_plot,
+)
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import load_switching
 
@@ -34,6 +42,19 @@ def test_wilson_interval_matches_hand_computed_values() -> None:
     low, high = wilson_interval(5, 10)
     assert (low, high) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
     assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def test_the_net_margin_has_a_hand_computed_interval() -> None:
+    def cell(strategy: str, magnitude: float, successes: int, pair: str = "trot-stand") -> CellResult:
+        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0)
+
+    rows = [cell("net", 0, 90), cell("net", 100, 50), cell("tmt", 0, 80), cell("tmt", 100, 40)]
+    rows.append(cell("random", 0, 100, pair="pace-stand"))  # better, but on another pair
+    margin = summary(rows)["net_margin"]["trot-stand"]
+    assert margin["second_best"] == "tmt" and margin["margin_pp"] == pytest.approx(10.0)
+    # variance of each mean: (p1 (1 - p1) / 100 + p2 (1 - p2) / 100) / 2^2
+    variance = (0.09 / 100 + 0.25 / 100) / 4 + (0.16 / 100 + 0.24 / 100) / 4
+    assert margin["ci95_pp"] == pytest.approx(100 * 1.959964 * variance**0.5, rel=1e-6)
 
 
 def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) -> None:

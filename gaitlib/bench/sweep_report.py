@@ -83,14 +83,18 @@ def success_table(rows: list[CellResult]) -> dict[str, dict[str, dict[str, float
 
 def summary(rows: list[CellResult]) -> dict:
     """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and per pair the margin
-    of ``net`` over the best other strategy (percentage points), where those exist."""
+    of ``net`` over the best other strategy (percentage points) with the half-width of its 95% interval (normal
+    approximation, the two strategies' cells taken as independent binomials: conservative under the sweep's common
+    random numbers), where those exist."""
     means: dict[str, dict[str, float]] = {}
+    variances: dict[str, dict[str, float]] = {}  # of each mean
     for strategy in dict.fromkeys(r.strategy for r in rows):
-        per_pair: dict[str, list[float]] = {}
+        per_pair: dict[str, list[CellResult]] = {}
         for r in rows:
             if r.strategy == strategy:
-                per_pair.setdefault(r.pair, []).append(r.success_rate)
-        means[strategy] = {pair: sum(v) / len(v) for pair, v in per_pair.items()}
+                per_pair.setdefault(r.pair, []).append(r)
+        means[strategy] = {pair: sum(r.success_rate for r in v) / len(v) for pair, v in per_pair.items()}
+        variances[strategy] = {pair: _variance_of_mean(v) for pair, v in per_pair.items()}
     overall = {s: sum(p.values()) / len(p) for s, p in means.items()}
     margins = {}
     if "net" in means:
@@ -98,13 +102,20 @@ def summary(rows: list[CellResult]) -> dict:
             others = [(means[s][pair], s) for s in means if s != "net" and pair in means[s]]
             if others:
                 best, name = max(others)
-                margins[pair] = {"second_best": name, "margin_pp": 100 * (value - best)}
+                half = _Z95 * math.sqrt(variances["net"][pair] + variances[name][pair])
+                margins[pair] = {"second_best": name, "margin_pp": 100 * (value - best), "ci95_pp": 100 * half}
     return {
         "mean_success": means,
         "overall": overall,
         "ranking": sorted(overall, key=overall.get, reverse=True),
         "net_margin": margins,
     }
+
+
+def _variance_of_mean(cells: list[CellResult]) -> float:
+    """Variance of the mean success rate over ``cells`` (independent binomial cells)."""
+    per_cell = [r.success_rate * (1 - r.success_rate) / r.samples for r in cells if r.samples]
+    return sum(per_cell) / len(cells) ** 2
 
 
 def write_csv(path: Path, rows: list[CellResult]) -> Path:

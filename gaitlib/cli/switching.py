@@ -188,5 +188,8 @@ def _print_summary(facts: dict, out: Path, plot: Path) -> None:
     console = Console()
     console.print(table)
     for pair, margin in facts["net_margin"].items():
-        console.print(f"net vs {margin['second_best']} on {pair}: {margin['margin_pp']:+.1f} percentage points")
+        console.print(
+            f"net vs {margin['second_best']} on {pair}: {margin['margin_pp']:+.1f} "
+            f"± {margin['ci95_pp']:.1f} percentage points (95%)"
+        )
     console.print(f"results: {out / 'results.csv'}, {out / 'results.json'}; plot: {plot}")
