@@ -170,8 +170,9 @@ def _all_pairs(gaits: tuple[str, ...]) -> list[tuple[str, str]]:
 
 
 def _print_summary(facts: dict, out: Path, plot: Path) -> None:
-    from rich.console import Console
     from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
 
     means = facts["mean_success"]
     pairs = list(dict.fromkeys(p for per in means.values() for p in per))
@@ -185,7 +186,7 @@ def _print_summary(facts: dict, out: Path, plot: Path) -> None:
         table.add_row(
             strategy, *(f"{per[p]:.3f}" if p in per else "-" for p in pairs), f"{facts['overall'][strategy]:.3f}"
         )
-    console = Console()
+    console = table_console()
     console.print(table)
     for pair, margin in facts["net_margin"].items():
         console.print(

@@ -1,13 +1,26 @@
-"""The two-column rich tables the measuring commands print (one measure per row)."""
+"""Printing the commands' rich tables: the console they go to, and the two-column tables of the measuring commands
+(one measure per row)."""
 
 from __future__ import annotations
 
-__all__ = ["print_measures"]
+__all__ = ["print_measures", "table_console"]
+
+_LOG_WIDTH = 160
+"""Columns of a table printed to a file or a pipe (rich's 80 would cut the names of wide tables), characters."""
+
+
+def table_console():
+    """A rich console on standard output, wide enough for any of our tables when that is not a terminal."""
+    from rich.console import Console
+
+    console = Console()
+    if not console.is_terminal:
+        console.width = _LOG_WIDTH
+    return console
 
 
 def print_measures(title: str, rows: list[tuple[str, str]], *, header: tuple[str, str] = ("measure", "value")) -> None:
     """Print ``rows`` of (measure, formatted value) under ``title``, values right-aligned."""
-    from rich.console import Console
     from rich.table import Table
 
     table = Table(title=title)
@@ -15,4 +28,4 @@ def print_measures(title: str, rows: list[tuple[str, str]], *, header: tuple[str
     table.add_column(header[1], justify="right")
     for name, value in rows:
         table.add_row(name, value)
-    Console().print(table)
+    table_console().print(table)

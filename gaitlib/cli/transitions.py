@@ -137,8 +137,9 @@ def _report(report: dict, as_json: bool) -> None:
     if as_json:
         print(json.dumps(report))
         return
-    from rich.console import Console
     from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
 
     rows = report.get("balanced_validation_accuracy") or {"shipped net": report["accuracy"]}
     pairs = [p for p in PAPER_PAIRS if any(p in r for r in rows.values())]
@@ -152,4 +153,4 @@ def _report(report: dict, as_json: bool) -> None:
         if kind in PAPER_TABLE_3:
             paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
             table.add_row(f"  paper {kind}", *(f"{paper[p]:.2f}" if p in paper else "-" for p in pairs))
-    Console().print(table)
+    table_console().print(table)
