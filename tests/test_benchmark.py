@@ -20,6 +20,7 @@ from gaitlib.bench.sweep_report import (
 )
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import load_switching
+from gaitlib.training import default_library_dir
 
 TINY = SweepConfig(
     strategies=("random", "net"),
@@ -99,6 +100,26 @@ def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) ->
     assert len(lines) == 4 and {line["strategy"] for line in lines} == {"random", "net"}
     plot = write_plot(tmp_path / "r.png", rows)
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_pushes_come_only_inside_the_disturbance_window(tmp_path) -> None:
+    setup = load_switching(default_library_dir())  # trained policies: without pushes the robot stays up
+    base = dataclasses.replace(
+        TINY, strategies=("random",), magnitudes=(1500.0,), samples=8, num_worlds=8, push_lead_s=0.0
+    )
+    # The quiet time before the first push (0.2-1.0 s) outlasts a 0.1 s window: no push ever lands.
+    calm = run_sweep(tmp_path / "calm", setup, dataclasses.replace(base, deadline_s=0.1))
+    # A 1.2 s window always holds one, and no 12.45 kg robot rides out a push of 1,500 N.
+    pushed = run_sweep(tmp_path / "pushed", setup, dataclasses.replace(base, deadline_s=1.2, horizon_s=1.2))
+    for results, successes in ((calm, 8), (pushed, 0)):
+        cell = results["groups"]["random@1500"]["cells"]["trot-stand"]
+        assert cell["successes"] == successes
+        assert cell["source_falls"] == 0  # no push before the request with no lead
+
+
+def test_a_horizon_shorter_than_the_deadline_is_refused(switching_library, tmp_path) -> None:
+    with pytest.raises(GaitlibError, match="horizon must be at least the deadline"):
+        run_sweep(tmp_path, load_switching(switching_library), dataclasses.replace(TINY, horizon_s=0.2))
 
 
 def test_resuming_with_other_settings_is_refused(switching_library, tmp_path) -> None:

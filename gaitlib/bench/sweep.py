@@ -195,6 +195,8 @@ def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
         raise GaitlibError("push magnitudes must not be negative")
     if not 0 <= cfg.push_lead_s < cfg.warmup_s:
         raise GaitlibError("the push lead must lie in [0, warm-up time)")
+    if cfg.horizon_s < cfg.deadline_s:
+        raise GaitlibError("the horizon must be at least the deadline, so that outcomes cover the disturbance window")
     if cfg.pairs is None:
         return list(itertools.permutations(setup.gaits, 2))
     for m, n in cfg.pairs:
@@ -327,5 +329,6 @@ class _Group:
         self.env.enable_pushes(ids, False)
         self.env.reset_worlds(ids, gait=self.source[self.pair[ids]])
         self.stage[ids] = self.SOURCE
+        self.push_left[ids] = -1  # armed again ``lead`` steps before the request
         extra = torch.randint(self.extra + 1, (len(ids),), generator=self.gen).to(self.env.device)
         self.steps_left[ids] = self.warmup + extra

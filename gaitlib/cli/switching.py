@@ -16,7 +16,9 @@ def run_command(
     dest: str = typer.Option("stand", "--to", help="Gait requested."),
     strategy: str = typer.Option("net", "--strategy", help="random, value, tmt, tmt-value or net."),
     request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s."),
-    push: float = typer.Option(0.0, "--push", help="Push magnitude, N (0: none): pushes from 0.6 s before the request until 2 s after it."),
+    push: float = typer.Option(
+        0.0, "--push", help="Push magnitude, N (0: none); pushes from 0.6 s before the request until 2 s after it."
+    ),
     seconds: float = typer.Option(6.0, "--seconds", help="Length of the run, s."),
     seed: int = typer.Option(0, "--seed", help="Random seed (randomization, pushes, strategy)."),
     plot: Path = typer.Option(Path("run.png"), "--plot", help="Where to write the plot (PNG)."),

@@ -125,7 +125,6 @@ def run_episode(
                 ctl.request(world, n)
             active = int(env.gait[0])
             result = ctl.step()
-            push = float(env.push_force[0].norm())
             if result.events:
                 trace.switch = result.events[0]
             if bool(result.fell[0]):
@@ -137,7 +136,7 @@ def run_episode(
             rows["score"].append(float(result.best_score[0]))
             rows["phase"].append(float(result.best_phase[0]))
             rows["height"].append(float(s.root_pos[0, 2]))
-            rows["push"].append(push)
+            rows["push"].append(float(env.push_force[0].norm()))
             rows["contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
             rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
         trace.time_s = np.asarray(rows["time"])
