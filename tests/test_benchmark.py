@@ -8,8 +8,8 @@ import json
 
 import pytest
 
-from gaitlib.bench.sweep import SweepConfig, load_results, run_sweep
-from gaitlib.bench.sweep_report import (
+from gaitlib.benchmark.sweep import SweepConfig, load_results, run_sweep
+from gaitlib.benchmark.report import (
     CellResult,
     cell_results,
     success_table,

@@ -7,7 +7,7 @@ import sys
 
 import typer
 
-from gaitlib.cli import bench, switching, train, transitions
+from gaitlib.cli import switching, throughput, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -25,7 +25,7 @@ app.command("collect")(transitions.collect_command)
 app.command("fit")(transitions.fit_command)
 app.command("benchmark")(switching.benchmark_command)
 app.command("run")(switching.run_command)
-app.add_typer(bench.app, name="bench")
+app.add_typer(throughput.app, name="throughput")
 
 
 def main() -> None:

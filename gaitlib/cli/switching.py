@@ -104,8 +104,8 @@ def benchmark_command(
     """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot."""
     from rich.console import Console
 
-    from gaitlib.bench.sweep import SweepConfig, run_sweep
-    from gaitlib.bench.sweep_report import cell_results, success_table, summary, write_csv, write_plot
+    from gaitlib.benchmark.sweep import SweepConfig, run_sweep
+    from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
     from gaitlib.cli.options import parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.errors import GaitlibError

@@ -10,7 +10,7 @@ import torch
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.meta.controller import DEADLINE_S, SwitchEvent
-from gaitlib.meta.session import SwitchingSetup
+from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.sim import make_backend
 
 __all__ = ["RunTrace", "run_episode"]

@@ -23,6 +23,7 @@ from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.robots import get_robot
+from gaitlib.training.export import export_onnx
 from gaitlib.training.policy import GaitPolicy, build_models
 
 __all__ = [
@@ -106,7 +107,7 @@ def save_entry(
     try:
         weights = staging / "policy.pt"
         torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
-        _export_onnx(actor, staging / "policy.onnx")
+        export_onnx(actor, staging / "policy.onnx")
         metadata = {
             "format_version": FORMAT_VERSION,
             "gait": description.name,
@@ -171,21 +172,6 @@ def load_entry(library: Path, name: str) -> LibraryEntry:
         policy=GaitPolicy(actor, critic),
         description=description,
         clip=clip_from_description(description),
-    )
-
-
-def _export_onnx(actor: torch.nn.Module, path: Path) -> None:
-    """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper."""
-    model = actor.as_onnx(verbose=False).to("cpu").eval()
-    torch.onnx.export(
-        model,
-        model.get_dummy_inputs(),
-        str(path),
-        export_params=True,
-        opset_version=18,
-        input_names=model.input_names,
-        output_names=model.output_names,
-        dynamo=False,
     )
 
 

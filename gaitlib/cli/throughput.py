@@ -1,4 +1,4 @@
-"""``gaitlib bench``: speed measurements that report ratios against a reference measured in the same run."""
+"""``gaitlib throughput``: speed measurements that report ratios against a reference measured in the same run."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from gaitlib.cli.tables import print_measures
 
 __all__ = ["app"]
 
-app = typer.Typer(help="Throughput benchmarks (ratios against plain MuJoCo C measured in the same run).")
+app = typer.Typer(help="Speed measurements (ratios against plain MuJoCo C measured in the same run).")
 
 
 @app.command("sim")
@@ -25,7 +25,7 @@ def sim(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Control steps per second of a backend against plain MuJoCo C on the same in-contact worlds."""
-    from gaitlib.bench.sim_throughput import measure_throughput
+    from gaitlib.throughput.sim import measure_throughput
     from gaitlib.sim import make_backend
 
     sim_backend = make_backend(backend, num_worlds=worlds, device=device)
@@ -58,7 +58,7 @@ def collect_throughput(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Samples per second of gaitlib collect against what the environment step allows (goal: ratio >= 0.8)."""
-    from gaitlib.bench.collect_throughput import measure_collect_throughput
+    from gaitlib.throughput.collect import measure_collect_throughput
     from gaitlib.training import default_library_dir
 
     result = measure_collect_throughput(

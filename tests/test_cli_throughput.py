@@ -1,4 +1,4 @@
-"""``gaitlib bench sim`` end to end, through the console entry point."""
+"""``gaitlib throughput sim`` end to end, through the console entry point."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ EXPECTED_KEYS = {"backend", "worlds", "control_hz", "substeps", "env_steps_per_s
 
 
 
-def test_bench_sim_prints_one_json_object() -> None:
-    result = gaitlib("bench", "sim", "--backend", "mujoco", "--worlds", "8", "--seconds", "0.4", "--json")
+def test_throughput_sim_prints_one_json_object() -> None:
+    result = gaitlib("throughput", "sim", "--backend", "mujoco", "--worlds", "8", "--seconds", "0.4", "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     assert EXPECTED_KEYS <= report.keys()
@@ -23,7 +23,7 @@ def test_bench_sim_prints_one_json_object() -> None:
 
 
 def test_unknown_backend_is_one_error_line() -> None:
-    result = gaitlib("bench", "sim", "--backend", "bullet", "--worlds", "2")
+    result = gaitlib("throughput", "sim", "--backend", "bullet", "--worlds", "2")
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         "gaitlib: error: unknown backend 'bullet' (known: auto, mujoco, newton)"
@@ -31,7 +31,7 @@ def test_unknown_backend_is_one_error_line() -> None:
 
 
 def test_zero_worlds_is_one_error_line() -> None:
-    result = gaitlib("bench", "sim", "--worlds", "0")
+    result = gaitlib("throughput", "sim", "--worlds", "0")
     assert result.returncode == 2
     assert result.stderr.strip() == "gaitlib: error: need at least one world, got 0"
 
@@ -41,11 +41,11 @@ def test_help_lists_only_working_commands() -> None:
     assert result.returncode == 0
     panel = result.stdout.split("Commands")[1]
     listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))
-    assert listed == {"bench", "benchmark", "collect", "eval", "fit", "run", "train"}
+    assert listed == {"benchmark", "throughput", "collect", "eval", "fit", "run", "train"}
 
 
 @pytest.mark.newton
-def test_bench_sim_newton_stdout_is_only_the_json_object() -> None:
-    result = gaitlib("bench", "sim", "--backend", "newton", "--worlds", "2", "--seconds", "0.3", "--json")
+def test_throughput_sim_newton_stdout_is_only_the_json_object() -> None:
+    result = gaitlib("throughput", "sim", "--backend", "newton", "--worlds", "2", "--seconds", "0.3", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["backend"] == "newton"

@@ -49,7 +49,7 @@ class CellResult:
 
 
 def cell_results(results: dict) -> list[CellResult]:
-    """Every finished cell of ``results`` (as :func:`~gaitlib.bench.sweep.run_sweep` returns), strategy, pair and
+    """Every finished cell of ``results`` (as :func:`~gaitlib.benchmark.sweep.run_sweep` returns), strategy, pair and
     magnitude in sweep order."""
     rows = []
     for group in results["groups"].values():

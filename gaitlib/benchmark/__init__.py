@@ -1,0 +1,1 @@
+"""The switching benchmark (``gaitlib benchmark``): strategies under pushes, per ordered pair (paper Fig. 4)."""

@@ -1,0 +1,1 @@
+"""Speed measurements (``gaitlib throughput``): ratios against a reference measured in the same run."""

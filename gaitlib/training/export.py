@@ -1,0 +1,24 @@
+"""The deployable form of a policy: the deterministic actor, observation normalizer included, as ONNX."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+__all__ = ["export_onnx"]
+
+
+def export_onnx(actor: torch.nn.Module, path: Path) -> None:
+    """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper."""
+    model = actor.as_onnx(verbose=False).to("cpu").eval()
+    torch.onnx.export(
+        model,
+        model.get_dummy_inputs(),
+        str(path),
+        export_params=True,
+        opset_version=18,
+        input_names=model.input_names,
+        output_names=model.output_names,
+        dynamo=False,
+    )
