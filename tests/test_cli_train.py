@@ -41,7 +41,7 @@ def test_eval_of_a_missing_entry_is_one_error_line(tmp_path) -> None:
 def test_unknown_preset_is_one_error_line(tmp_path) -> None:
     result = gaitlib("train", "stand", "--preset", "gpu-cluster", "--library", str(tmp_path))
     assert result.returncode == 2
-    assert result.stderr.strip() == "gaitlib: error: unknown preset 'gpu-cluster' (known: cpu, paper)"
+    assert result.stderr.strip() == "gaitlib: error: unknown preset 'gpu-cluster' (known: cpu, paper, tiny)"
 
 
 def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:

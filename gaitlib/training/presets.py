@@ -1,10 +1,10 @@
-"""PPO presets for ``gaitlib train``: the paper's (Table 2) and one tuned for a 2-core CPU."""
+"""PPO presets for ``gaitlib train``: the paper's (Table 2), one tuned for a 2-core CPU, and a tiny one for tests."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from gaitlib.errors import UnknownNameError
+from gaitlib.registry import Registry
 
 __all__ = ["TrainPreset", "get_preset", "preset_names", "rsl_rl_config"]
 
@@ -56,10 +56,12 @@ class TrainPreset:
         return self.num_envs * self.steps_per_env // self.mini_batches
 
 
-_PRESETS = {
-    # Paper Table 2: 4096 envs x 24 steps, 5 epochs, 8 mini-batches of 12288, lr 3e-4, gamma/lambda 0.95,
-    # clip 0.2, KL 0.008, entropy 0. Network sizes are not given there; 512-256-128 is rsl-rl's locomotion default.
-    "paper": TrainPreset(
+_PRESETS: Registry[TrainPreset] = Registry("preset")
+# Paper Table 2: 4096 envs x 24 steps, 5 epochs, 8 mini-batches of 12288, lr 3e-4, gamma/lambda 0.95,
+# clip 0.2, KL 0.008, entropy 0. Network sizes are not given there; 512-256-128 is rsl-rl's locomotion default.
+_PRESETS.register(
+    "paper",
+    TrainPreset(
         name="paper",
         num_envs=4096,
         steps_per_env=24,
@@ -76,9 +78,12 @@ _PRESETS = {
         init_std=0.5,
         iterations=3000,
     ),
-    # 2-core CPU: fewer worlds and smaller networks. benchmarks/train_presets.py (docs/benchmarks.md) compared
-    # 128, 256 and 512 worlds and 5x8 updates for 4 min each: 512 worlds learned most per wall-clock second.
-    "cpu": TrainPreset(
+)
+# 2-core CPU: fewer worlds and smaller networks. benchmarks/train_presets.py (docs/benchmarks.md) compared
+# 128, 256 and 512 worlds and 5x8 updates for 4 min each: 512 worlds learned most per wall-clock second.
+_PRESETS.register(
+    "cpu",
+    TrainPreset(
         name="cpu",
         num_envs=512,
         steps_per_env=24,
@@ -95,19 +100,33 @@ _PRESETS = {
         init_std=0.5,
         iterations=1000,
     ),
-}
+)
+# The tests' preset: the cpu preset shrunk to 4 worlds x 8 steps, one update of one mini-batch and 32-16 networks,
+# small enough for the tests to train on the real simulator. Not meant to learn anything.
+_PRESETS.register(
+    "tiny",
+    replace(
+        _PRESETS.get("cpu"),
+        name="tiny",
+        num_envs=4,
+        steps_per_env=8,
+        epochs=1,
+        mini_batches=1,
+        actor_hidden=(32, 16),
+        critic_hidden=(32, 16),
+        iterations=1,
+    ),
+)
 
 
 def get_preset(name: str) -> TrainPreset:
-    """The preset called ``name``; raises :class:`UnknownNameError` for an unknown name."""
-    if name not in _PRESETS:
-        raise UnknownNameError("preset", name, list(_PRESETS))
-    return _PRESETS[name]
+    """The preset called ``name``; raises :class:`~gaitlib.errors.UnknownNameError` for an unknown name."""
+    return _PRESETS.get(name)
 
 
 def preset_names() -> list[str]:
     """Names of the presets."""
-    return sorted(_PRESETS)
+    return sorted(_PRESETS.names())
 
 
 def rsl_rl_config(preset: TrainPreset) -> dict:
