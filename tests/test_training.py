@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import numpy as np
@@ -14,16 +13,10 @@ from gaitlib.training import LibraryError, get_preset, load_entry
 from gaitlib.training.library import entry_names
 from gaitlib.training.trainer import TrainRequest, train_gait
 
-TINY = dataclasses.replace(
-    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
-    critic_hidden=(32, 16),
-)
-
-
 def request(tmp_path, gait="stand", **kw) -> TrainRequest:
     base = dict(
         description=get_gait(gait),
-        preset=TINY,
+        preset=get_preset("tiny"),
         iterations=2,
         library=tmp_path / "library",
         run_dir=tmp_path / "runs" / gait,
@@ -51,10 +44,12 @@ def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
     assert set(seen[-1].reward_terms) == {"pose", "joint_velocity", "end_effector", "root_pose", "root_velocity"}
     entry = load_entry(tmp_path / "library", "stand")
     first = torch.load(tmp_path / "runs" / "stand" / "checkpoints" / "model_1.pt", weights_only=False)
+    assert first["iter"] == 1 and first["infos"]["gait"] == "stand" and first["infos"]["samples"] == 32
     final = entry.policy.actor.state_dict()
-    assert not torch.equal(first["alg"]["actor_state_dict"]["mlp.0.weight"], final["mlp.0.weight"])
+    assert not torch.equal(first["actor_state_dict"]["mlp.0.weight"], final["mlp.0.weight"])
     meta = entry.metadata
-    assert meta["training"]["samples"] == 64 and meta["training"]["preset"]["name"] == "cpu"
+    assert meta["training"]["samples"] == 64 and meta["training"]["preset"]["name"] == "tiny"
+    assert [row[0] for row in meta["training"]["curve"]["rows"]] == [1, 2]  # each iteration once
     assert {"fall_rate", "joint_rmse", "forward_speed"} <= set(meta["evaluation"])
     assert meta["action"]["type"] == "residual_to_reference"
     assert entry.policy.latent_dim == 16
@@ -71,18 +66,20 @@ def test_latent_and_value_have_documented_shapes(trained) -> None:
     assert torch.allclose(action, entry.policy.act(obs))
 
 
-def test_onnx_export_matches_the_torch_actor(trained) -> None:
-    from onnx.reference import ReferenceEvaluator
+def test_onnx_export_has_a_batch_axis_and_matches_the_torch_actor(trained) -> None:
+    import onnxruntime
+    from tensordict import TensorDict
 
     tmp_path, _, _ = trained
     entry = load_entry(tmp_path / "library", "stand")
-    x = torch.randn(3, 158)
-    from tensordict import TensorDict
-
-    expected = entry.policy.act(TensorDict({"policy": x, "privileged": torch.zeros(3, 14)}, batch_size=[3]))
-    session = ReferenceEvaluator(str(tmp_path / "library" / "stand" / "policy.onnx"))
+    onnx_file = tmp_path / "library" / "stand" / "policy.onnx"
+    session = onnxruntime.InferenceSession(str(onnx_file), providers=["CPUExecutionProvider"])
+    assert [(io.name, io.shape) for io in session.get_inputs()] == [("obs", ["batch", 158])]
+    assert [(io.name, io.shape) for io in session.get_outputs()] == [("actions", ["batch", 12])]
+    x = torch.randn(7, 158, generator=torch.Generator().manual_seed(0))
+    expected = entry.policy.act(TensorDict({"policy": x, "privileged": torch.zeros(7, 14)}, batch_size=[7]))
     (got,) = session.run(None, {"obs": x.numpy()})
-    np.testing.assert_allclose(got, expected.numpy(), atol=1e-5)
+    np.testing.assert_allclose(got, expected.numpy(), atol=1e-5, rtol=1e-5)
 
 
 def test_training_one_gait_leaves_other_entries_untouched(tmp_path) -> None:
@@ -101,12 +98,39 @@ def test_resume_continues_from_the_checkpoint(tmp_path) -> None:
     with pytest.raises(KeyboardInterrupt):
         train_gait(request(tmp_path, iterations=3), on_iteration=stop_after_first)
     saved = torch.load(tmp_path / "runs" / "stand" / "checkpoints" / "latest.pt", weights_only=False)
-    assert saved["iteration"] == 1 and saved["samples"] == 32
+    assert saved["iter"] == 1 and saved["infos"]["samples"] == 32
     assert not (tmp_path / "library" / "stand").exists()  # nothing half-written
     seen = []
     result = train_gait(request(tmp_path, iterations=3, resume=True), on_iteration=seen.append)
     assert [s.iteration for s in seen] == [2, 3]
-    assert result.samples == 3 * 32
+    assert result.samples == 3 * 32 and result.iterations == 3
+    rows = load_entry(tmp_path / "library", "stand").metadata["training"]["curve"]["rows"]
+    assert [row[0] for row in rows] == [1, 2, 3]  # the curve goes on across the resume
+
+
+def test_resume_refuses_a_checkpoint_of_another_gait(tmp_path) -> None:
+    from gaitlib.errors import GaitlibError
+
+    train_gait(request(tmp_path, iterations=1))
+    with pytest.raises(GaitlibError, match="is for gait 'stand' with preset 'tiny', not 'trot' with 'tiny'"):
+        train_gait(request(tmp_path, gait="trot", iterations=2, resume=True, run_dir=tmp_path / "runs" / "stand"))
+
+
+def test_a_failed_checkpoint_write_leaves_the_previous_checkpoint(tmp_path, monkeypatch) -> None:
+    train_gait(request(tmp_path, iterations=1))
+    checkpoints = tmp_path / "runs" / "stand" / "checkpoints"
+    before = (checkpoints / "latest.pt").read_bytes()
+
+    def torn_save(obj, path, *args, **kwargs):  # writes part of the file, then the disk fills up
+        with open(path, "wb") as handle:
+            handle.write(before[: len(before) // 2])
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(torch, "save", torn_save)
+    with pytest.raises(OSError, match="No space left"):
+        train_gait(request(tmp_path, iterations=2, resume=True))
+    assert (checkpoints / "latest.pt").read_bytes() == before
+    assert sorted(p.name for p in checkpoints.iterdir()) == ["latest.pt", "model_1.pt"]  # no partial file left
 
 
 def test_resume_without_checkpoint_is_an_error(tmp_path) -> None:

@@ -10,7 +10,8 @@ __all__ = ["export_onnx"]
 
 
 def export_onnx(actor: torch.nn.Module, path: Path) -> None:
-    """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper."""
+    """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper; the first axis of input
+    ``obs`` (N, 158) and output ``actions`` (N, 12) is the batch, of any size N."""
     model = actor.as_onnx(verbose=False).to("cpu").eval()
     torch.onnx.export(
         model,
@@ -20,5 +21,6 @@ def export_onnx(actor: torch.nn.Module, path: Path) -> None:
         opset_version=18,
         input_names=model.input_names,
         output_names=model.output_names,
+        dynamic_axes={name: {0: "batch"} for name in [*model.input_names, *model.output_names]},
         dynamo=False,
     )

@@ -1,7 +1,10 @@
-"""Train one gait with rsl-rl PPO: periodic and Ctrl-C checkpoints, resume, TensorBoard, result to the library.
+"""Train one gait with rsl-rl PPO on rsl-rl's own runner: progress per iteration, TensorBoard, atomic checkpoints,
+resume, Ctrl-C, then evaluation and the library entry.
 
-The loop is rsl-rl's ``OnPolicyRunner.learn`` (rollout, returns, PPO update) driven step by step so that gaitlib
-can report progress, checkpoint atomically and stop cleanly; the algorithm itself is rsl-rl's, unchanged.
+:class:`GaitRunner` subclasses ``rsl_rl.runners.OnPolicyRunner`` (as mjlab's ``rl/runner.py`` does,
+https://github.com/mujocolab/mjlab): rollout, returns and the PPO update are rsl-rl's ``learn``, called for one
+iteration at a time so that gaitlib can report, checkpoint and stop between iterations. Checkpoints keep the layout
+of rsl-rl's ``save`` (the algorithm's state, ``iter``, ``infos``) with gaitlib's run record in ``infos``.
 """
 
 from __future__ import annotations
@@ -10,25 +13,29 @@ import contextlib
 import dataclasses
 import io
 import math
-import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.utils.logger import Logger
 
+from gaitlib.atomic import atomic_path
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.errors import GaitlibError
-from gaitlib.gaits import GaitDescription, clip_from_description
+from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.library import save_entry
 from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
 
-__all__ = ["IterationStats", "TrainRequest", "TrainResult", "train_gait"]
+__all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "train_gait"]
+
+_CURVE_ROWS = 60
+"""About how many learning-curve rows the entry's metadata keeps (the last one always)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -95,125 +102,182 @@ class TrainResult:
     evaluation: EvalResult
 
 
+class _IterationLog(Logger):
+    """Sums what rsl-rl's ``learn`` reports of one iteration, for :class:`IterationStats`. It takes the place of
+    rsl-rl's ``Logger``, whose ``log`` prints a report to the console (gaitlib prints only in its CLI); with no log
+    folder the base class opens no writer and stores no code state."""
+
+    def __init__(self, runner: OnPolicyRunner) -> None:
+        super().__init__(
+            log_dir=None,
+            cfg=runner.cfg,
+            env_cfg=runner.env.cfg,
+            num_envs=runner.env.num_envs,
+            is_distributed=runner.is_distributed,
+            gpu_world_size=runner.gpu_world_size,
+            gpu_global_rank=runner.gpu_global_rank,
+            device=runner.device,
+        )
+        self._env = runner.env
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the last iteration."""
+        self.steps, self.reward_sum, self.seconds = 0, 0.0, 0.0
+        self.finished_s: list[float] = []
+        self.term_sums: dict[str, float] = {}
+        self.losses: dict[str, float] = {}
+
+    def process_env_step(self, rewards, dones, extras, intrinsic_rewards=None) -> None:
+        self.steps += 1
+        self.reward_sum += float(rewards.mean())
+        if dones.any():
+            self.finished_s += (self._env.last_episode_length[dones] * self._env.dt).tolist()
+        for key, value in extras["log"].items():
+            if key.startswith("/reward/"):
+                name = key.removeprefix("/reward/")
+                self.term_sums[name] = self.term_sums.get(name, 0.0) + float(value)
+
+    def log(self, *, collect_time: float, learn_time: float, loss_dict: dict, **_) -> None:
+        self.seconds = collect_time + learn_time
+        self.losses = {name: float(value) for name, value in loss_dict.items()}
+
+
+class GaitRunner(OnPolicyRunner):
+    """rsl-rl's on-policy runner for one :class:`TrainRequest`. ``current_learning_iteration`` counts the
+    iterations completed (resumed runs included), which is also the ``iter`` its checkpoints record."""
+
+    def __init__(self, env: ImitationEnv, request: TrainRequest) -> None:
+        with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the model structure
+            super().__init__(env, rsl_rl_config(request.preset), log_dir=None, device=str(env.device))
+        self.logger = _IterationLog(self)
+        self.request = request
+        """The run."""
+        self.samples = 0
+        """Environment steps so far, all worlds (resumed runs included)."""
+        self.elapsed = 0.0
+        """Training time so far, s (resumed runs included)."""
+        self.curve: list[list] = []
+        """Learning-curve rows: iteration, training time s, mean reward, mean episode s (None: none ended)."""
+
+    @property
+    def checkpoints(self) -> Path:
+        """The run's checkpoint folder (``latest.pt``, ``model_<iterations>.pt``)."""
+        return self.request.run_dir / "checkpoints"
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        """rsl-rl's checkpoint layout, written atomically: a failed write leaves the old file as it was."""
+        state = self.alg.save() | {"iter": self.current_learning_iteration, "infos": infos}
+        with atomic_path(Path(path)) as tmp:
+            torch.save(state, tmp)
+
+    def checkpoint(self, name: str = "latest.pt") -> None:
+        """Save the run under ``checkpoints/name`` with its record (gait, preset, seed, samples, time, curve)."""
+        record = {
+            "gait": self.request.description.name,
+            "preset": self.request.preset.name,
+            "seed": self.request.seed,
+            "samples": self.samples,
+            "elapsed_s": self.elapsed,
+            "curve": self.curve,
+        }
+        self.save(str(self.checkpoints / name), record)
+
+    def resume(self) -> None:
+        """Continue from ``checkpoints/latest.pt``; a checkpoint of another gait or preset is refused."""
+        latest = self.checkpoints / "latest.pt"
+        if not latest.is_file():
+            raise GaitlibError(f"nothing to resume: no checkpoint at {latest}")
+        saved = torch.load(latest, map_location=self.device, weights_only=False)
+        record = saved.get("infos")
+        if not isinstance(record, dict):
+            raise GaitlibError(f"checkpoint {latest} has no gaitlib run record (an older layout): train afresh")
+        gait, preset = self.request.description.name, self.request.preset.name
+        if (record["gait"], record["preset"]) != (gait, preset):
+            raise GaitlibError(
+                f"checkpoint {latest} is for gait '{record['gait']}' with preset '{record['preset']}', "
+                f"not '{gait}' with '{preset}'"
+            )
+        self.alg.load(saved, None, strict=True)
+        self.current_learning_iteration = saved["iter"]
+        self.samples, self.elapsed, self.curve = record["samples"], record["elapsed_s"], record["curve"]
+
+    def iterate(self) -> IterationStats:
+        """One rsl-rl iteration (rollout, returns, PPO update); its statistics, also added to the curve."""
+        log = self.logger
+        log.clear()
+        super().learn(1)  # leaves current_learning_iteration at this iteration's index
+        self.current_learning_iteration += 1
+        step_samples = self.env.num_envs * log.steps
+        self.samples += step_samples
+        self.elapsed += log.seconds
+        stats = IterationStats(
+            iteration=self.current_learning_iteration,
+            total=self.request.iterations,
+            samples=self.samples,
+            samples_per_s=step_samples / log.seconds,
+            elapsed=self.elapsed,
+            mean_reward=log.reward_sum / log.steps,
+            mean_episode_length=sum(log.finished_s) / len(log.finished_s) if log.finished_s else math.nan,
+            reward_terms={name: total / log.steps for name, total in log.term_sums.items()},
+            losses=log.losses,
+        )
+        length = None if math.isnan(stats.mean_episode_length) else round(stats.mean_episode_length, 2)
+        self.curve.append([stats.iteration, round(self.elapsed, 1), round(stats.mean_reward, 4), length])
+        return stats
+
+    def train(self, *, on_iteration: Callable[[IterationStats], None] | None = None) -> None:
+        """Iterate up to the request's iteration count or time limit, writing TensorBoard scalars to the run folder;
+        checkpoint every ``checkpoint_every`` iterations, at the end, and on Ctrl-C (then re-raise)."""
+        from torch.utils.tensorboard import SummaryWriter
+
+        request = self.request
+        writer = SummaryWriter(log_dir=str(request.run_dir))
+        try:
+            while self.current_learning_iteration < request.iterations:
+                stats = self.iterate()
+                _log(writer, stats)
+                if on_iteration is not None:
+                    on_iteration(stats)
+                if stats.iteration % request.checkpoint_every == 0:
+                    self.checkpoint()
+                    self.checkpoint(f"model_{stats.iteration}.pt")
+                if request.time_limit_s is not None and self.elapsed >= request.time_limit_s:
+                    break
+        except KeyboardInterrupt:
+            self.checkpoint()
+            raise
+        finally:
+            writer.close()
+        self.checkpoint()
+
+
 def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:
     """Train, checkpoint, evaluate and write the library entry; Ctrl-C saves a checkpoint and re-raises."""
-    from rsl_rl.runners import OnPolicyRunner
-    from torch.utils.tensorboard import SummaryWriter
-
-    preset = request.preset
     if request.iterations < 1:
         raise GaitlibError(f"--iterations must be positive, got {request.iterations}")
     torch.manual_seed(request.seed)
+    preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
-    sim = make_backend(backend_name, num_worlds=preset.num_envs)
     env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=preset.push_force))
-    env = ImitationEnv(sim, [clip], env_cfg, seed=request.seed)
-    with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the model structure
-        runner = OnPolicyRunner(env, rsl_rl_config(preset), log_dir=None, device=str(env.device))
-    alg = runner.alg
-
-    checkpoints = request.run_dir / "checkpoints"
-    checkpoints.mkdir(parents=True, exist_ok=True)
-    latest = checkpoints / "latest.pt"
-    start, samples, elapsed = 0, 0, 0.0
-    curve: list[list] = []  # learning curve rows: iteration, training time s, mean reward, mean episode s
-    if request.resume:
-        if not latest.is_file():
-            raise GaitlibError(f"nothing to resume: no checkpoint at {latest}")
-        saved = torch.load(latest, map_location=str(env.device), weights_only=False)
-        if saved["gait"] != request.description.name or saved["preset"] != preset.name:
-            raise GaitlibError(
-                f"checkpoint {latest} is for gait '{saved['gait']}' with preset '{saved['preset']}', "
-                f"not '{request.description.name}' with '{preset.name}'"
-            )
-        alg.load(saved["alg"], None, strict=True)
-        start, samples, elapsed = saved["iteration"], saved["samples"], saved["elapsed"]
-        curve = saved["curve"]
-
-    def checkpoint(iteration: int, name: str = "latest.pt") -> None:
-        state = {
-            "alg": alg.save(),
-            "iteration": iteration,
-            "samples": samples,
-            "elapsed": elapsed,
-            "gait": request.description.name,
-            "preset": preset.name,
-            "seed": request.seed,
-            "curve": curve,
-        }
-        tmp = checkpoints / f".{name}.tmp"
-        torch.save(state, tmp)
-        os.replace(tmp, checkpoints / name)
-
-    writer = SummaryWriter(log_dir=str(request.run_dir))
-    obs = env.get_observations()
-    alg.train_mode()
-    completed = start  # iterations whose update has been applied
+    sim = make_backend(backend_name, num_worlds=preset.num_envs)
     try:
-        for iteration in range(start, request.iterations):
-            t0 = time.perf_counter()
-            reward_sum, finished_lengths = 0.0, []
-            term_sums: dict[str, float] = {}
-            with torch.inference_mode():
-                for _ in range(preset.steps_per_env):
-                    actions = alg.act(obs)
-                    obs, rewards, dones, extras = env.step(actions)
-                    alg.process_env_step(obs, rewards, dones, extras)
-                    reward_sum += float(rewards.mean())
-                    if dones.any():
-                        finished_lengths += (env.last_episode_length[dones] * env.dt).tolist()
-                    for key, value in extras["log"].items():
-                        if key.startswith("/reward/"):
-                            term_sums[key[8:]] = term_sums.get(key[8:], 0.0) + float(value)
-                alg.compute_returns(obs)
-            losses = alg.update()
-            dt = time.perf_counter() - t0
-            step_samples = preset.num_envs * preset.steps_per_env
-            samples += step_samples
-            elapsed += dt
-            completed = iteration + 1
-            stats = IterationStats(
-                iteration=iteration + 1,
-                total=request.iterations,
-                samples=samples,
-                samples_per_s=step_samples / dt,
-                elapsed=elapsed,
-                mean_reward=reward_sum / preset.steps_per_env,
-                mean_episode_length=sum(finished_lengths) / len(finished_lengths) if finished_lengths else float("nan"),
-                reward_terms={k: v / preset.steps_per_env for k, v in term_sums.items()},
-                losses={k: float(v) for k, v in losses.items()},
-            )
-            _log(writer, stats)
-            length = stats.mean_episode_length
-            curve.append(
-                [
-                    stats.iteration,
-                    round(elapsed, 1),
-                    round(stats.mean_reward, 4),
-                    None if math.isnan(length) else round(length, 2),
-                ]
-            )
-            if on_iteration is not None:
-                on_iteration(stats)
-            if completed % request.checkpoint_every == 0:
-                checkpoint(completed)
-                checkpoint(completed, f"model_{completed}.pt")
-            if request.time_limit_s is not None and elapsed >= request.time_limit_s:
-                break
-    except KeyboardInterrupt:
-        checkpoint(completed)
-        writer.close()
+        runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=request.seed), request)
+        if request.resume:
+            runner.resume()
+        runner.train(on_iteration=on_iteration)
+    finally:
         sim.close()
-        raise
-    checkpoint(completed)
-    writer.close()
-    sim.close()
+    return _finish(runner, clip, backend_name, env_cfg)
 
+
+def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig) -> TrainResult:
+    """Evaluate the trained policy and write it, with its run record, into the library."""
+    request, preset, alg = runner.request, runner.request.preset, runner.alg
     alg.eval_mode()
-    policy = GaitPolicy(alg.get_policy(), alg.critic)
     evaluation = evaluate_policy(
-        policy,
+        GaitPolicy(alg.get_policy(), alg.critic),
         clip,
         action_scale=env_cfg.action_scale,
         episodes=request.eval_episodes,
@@ -235,20 +299,32 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
         training={
             "preset": dataclasses.asdict(preset),
             "backend": backend_name,
-            "iterations": completed,
-            "samples": samples,
-            "wall_clock_s": round(elapsed, 1),
+            "iterations": runner.current_learning_iteration,
+            "samples": runner.samples,
+            "wall_clock_s": round(runner.elapsed, 1),
             "seed": request.seed,
             "push_force_max_n": preset.push_force,
             "episode_seconds": preset.episode_seconds,
             "curve": {
                 "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
-                "rows": curve[:: max(1, len(curve) // 60)] + curve[-1:],
+                "rows": _thin_curve(runner.curve),
             },
         },
         evaluation=evaluation.as_dict(),
     )
-    return TrainResult(entry=entry, iterations=completed, samples=samples, wall_clock_s=elapsed, evaluation=evaluation)
+    return TrainResult(
+        entry=entry,
+        iterations=runner.current_learning_iteration,
+        samples=runner.samples,
+        wall_clock_s=runner.elapsed,
+        evaluation=evaluation,
+    )
+
+
+def _thin_curve(rows: list[list], *, most: int = _CURVE_ROWS) -> list[list]:
+    """Every k-th row of a learning curve (about ``most`` rows) and the last row, each once."""
+    kept = rows[:: max(1, len(rows) // most)]
+    return kept if kept[-1:] == rows[-1:] else kept + rows[-1:]
 
 
 def _log(writer, stats: IterationStats) -> None:
