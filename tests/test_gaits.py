@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -108,7 +109,7 @@ def test_registry_ships_gaits_and_rejects_unknown_names() -> None:
 
 
 def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
-    monkeypatch.setattr(registry, "_GAITS", dict(registry._GAITS))
+    monkeypatch.setattr(registry, "_GAITS", copy.deepcopy(registry._GAITS))
     path = tmp_path / "amble.toml"
     path.write_text(
         "duty_factor = 0.7\nstride_frequency = 1.5\nforward_speed = 0.3\nswing_height = 0.05\n"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import pytest
@@ -43,7 +44,8 @@ def test_malformed_model_file(tmp_path) -> None:
 
 
 def test_backend_that_cannot_be_imported(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(gaitlib.sim._BACKENDS, "missing", "gaitlib.sim.no_such_module:Backend")
+    monkeypatch.setattr(gaitlib.sim, "_BACKENDS", copy.deepcopy(gaitlib.sim._BACKENDS))
+    gaitlib.sim.register_backend("missing", "gaitlib.sim.no_such_module:Backend")
     with pytest.raises(SimulationError, match="backend 'missing' is not available here"):
         make_backend("missing", num_worlds=1)
 

@@ -30,9 +30,9 @@ from gaitlib.envs.randomization import (
 )
 from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import RewardConfig
-from gaitlib.envs.rotations import quat_angle_between, quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.gaits import ReferenceClip
+from gaitlib.rotations import quat_angle_between, quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import KinematicState, SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
@@ -93,7 +93,7 @@ class ImitationEnv(VecEnv):
         self._history = torch.zeros(n, obs_fn.HISTORY, obs_fn.FRAME_DIM, device=dev)  # observed frames
         self._last_reading = torch.zeros(n, obs_fn.FRAME_DIM, device=dev)  # clean frame of the previous step
         self._params = sample_world_parameters(cfg.randomization, n, self._gen)
-        self._dynamics = torch.zeros(n, 5, device=dev)
+        self._dynamics = torch.zeros(n, obs_fn.width(obs_fn.DYNAMICS), device=dev)  # what the critic sees
         self._state: SimState = backend.state()
         self._terms = {name: torch.zeros(n, device=dev) for name in cfg.reward.terms()}
         self._obs: TensorDict | None = None
@@ -249,9 +249,7 @@ class ImitationEnv(VecEnv):
         kp = params.kp.to(self.device).unsqueeze(1).expand(k, self.num_actions)
         kd = params.kd.to(self.device).unsqueeze(1).expand(k, self.num_actions)
         self.backend.set_pd_gains(world_ids, kp, kd)
-        self._dynamics[world_ids] = torch.stack(
-            [params.gravity_scale, params.mass_scale, params.friction, params.kp, params.kd], 1
-        ).to(self.device)
+        self._dynamics[world_ids] = torch.stack([getattr(params, f.name) for f in obs_fn.DYNAMICS], 1).to(self.device)
 
     def _noise(self, shape: torch.Size, amplitude: float) -> torch.Tensor:
         if not self.cfg.randomization.enabled or amplitude == 0.0:
@@ -267,7 +265,7 @@ class ImitationEnv(VecEnv):
         reading = self._clean_frame()
         lag = (self._params.latency.to(self.device) / self.dt).unsqueeze(1)
         observed = reading + lag * (self._last_reading - reading)
-        sensed = slice(0, obs_fn.FRAME_DIM - self.num_actions)  # actions are known exactly
+        sensed = obs_fn.SENSED  # actions are known exactly
         observed[:, sensed] += self._noise(observed[:, sensed].shape, self.cfg.randomization.observation_noise)
         self._last_reading = reading
         self._history = torch.cat([observed.unsqueeze(1), self._history[:, :-1]], dim=1)

@@ -1,57 +1,122 @@
-"""Observation layout (design brief section 3) as small pure functions.
+"""Observation layout (design brief section 3): one declaration of every field, from which every width, slice and
+scale is derived, and the small pure functions that fill it.
 
 Actor observation (158) = state s_t (102) + reference g_t (56):
 
-* s_t: the proprioceptive frame (34) of the current and the two previous control steps, newest first. A frame is
-  12 joint angles (rad), projected gravity in the trunk frame (3, unit vector: the orientation), trunk angular
-  velocity in the trunk frame (3, rad/s), 4 foot contacts (0/1) and the 12 previous actions.
-* g_t: the reference at :data:`REFERENCE_OFFSETS` control steps ahead (t+1, t+2, t+10, t+30: about one second),
-  each 12 joint angles (rad), trunk height (m) and forward speed in the heading frame (m/s).
+* s_t: the proprioceptive :data:`FRAME` (34) of the current and the two previous control steps, newest first: joint
+  angles (rad), projected gravity in the trunk frame (unit vector: the orientation), trunk angular velocity in the
+  trunk frame (rad/s), foot contacts (0/1) and the previous actions.
+* g_t: the :data:`REFERENCE_FRAME` (14) at :data:`REFERENCE_OFFSETS` control steps ahead (t+1, t+2, t+10, t+30:
+  about one second): joint angles (rad), trunk height (m) and forward speed in the heading frame (m/s).
 
-Critic (privileged) extras (14): trunk linear velocity in the trunk frame (3), trunk height (1), gait phase as
-sin/cos (2), the world's randomized gravity scale, mass scale, friction, kp/60 and kd (5), push force / 100 N (3).
+Critic (privileged) extras, :data:`PRIVILEGED` (14): trunk linear velocity in the trunk frame, trunk height, gait
+phase as sin/cos, the world's randomized :data:`DYNAMICS` (gravity scale, mass scale, friction, kp in units of the
+robot's default stiffness, kd) and the push force in units of 100 N.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 
 from gaitlib.envs.reference import ReferenceFrame
-from gaitlib.envs.rotations import quat_rotate_inverse
+from gaitlib.robots.a1.constants import KP_DEFAULT, NUM_JOINTS, NUM_LEGS
+from gaitlib.rotations import quat_rotate_inverse
 
 __all__ = [
     "ACTOR_OBS_DIM",
+    "DYNAMICS",
+    "FRAME",
     "FRAME_DIM",
     "HISTORY",
+    "PRIVILEGED",
     "PRIVILEGED_DIM",
     "REFERENCE_DIM",
+    "REFERENCE_FRAME",
     "REFERENCE_OFFSETS",
+    "SENSED",
     "STATE_DIM",
+    "Field",
     "layout",
     "privileged_features",
     "proprioceptive_frame",
     "reference_features",
+    "width",
 ]
 
-FRAME_DIM = 34
-"""Size of one proprioceptive frame."""
+
+class Field(NamedTuple):
+    """One named block of an observation vector."""
+
+    name: str
+    width: int
+    """Number of values."""
+    unit: float = 1.0
+    """The observation holds the quantity divided by this (in the quantity's SI unit)."""
+
+
+def width(fields: tuple[Field, ...]) -> int:
+    """Number of values of a sequence of fields."""
+    return sum(f.width for f in fields)
+
+
+def _assemble(fields: tuple[Field, ...], parts: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Concatenate ``parts`` (name -> (N, width)) in the order of ``fields``, each divided by its unit."""
+    return torch.cat([parts[f.name] if f.unit == 1.0 else parts[f.name] / f.unit for f in fields], dim=-1)
+
+
+FRAME: tuple[Field, ...] = (
+    Field("joint_pos", NUM_JOINTS),
+    Field("projected_gravity", 3),
+    Field("ang_vel_trunk", 3),
+    Field("foot_contact", NUM_LEGS),
+    Field("prev_action", NUM_JOINTS),
+)
+"""One proprioceptive frame."""
+FRAME_DIM = width(FRAME)  # 34
+SENSED = slice(0, FRAME_DIM - FRAME[-1].width)
+"""The values of a frame that sensors read (all but the previous actions, which are known exactly)."""
 HISTORY = 3
 """Frames in s_t: current and two past control steps."""
 STATE_DIM = FRAME_DIM * HISTORY  # 102
+REFERENCE_FRAME: tuple[Field, ...] = (
+    Field("joint_pos", NUM_JOINTS),
+    Field("root_height", 1),
+    Field("forward_speed", 1),
+)
+"""The reference at one offset."""
 REFERENCE_OFFSETS = (1, 2, 10, 30)
 """Control steps ahead at which the reference is shown to the policy."""
-REFERENCE_DIM = 14 * len(REFERENCE_OFFSETS)  # 56
+REFERENCE_DIM = width(REFERENCE_FRAME) * len(REFERENCE_OFFSETS)  # 56
 ACTOR_OBS_DIM = STATE_DIM + REFERENCE_DIM  # 158
-PRIVILEGED_DIM = 14
+DYNAMICS: tuple[Field, ...] = (
+    Field("gravity_scale", 1),
+    Field("mass_scale", 1),
+    Field("friction", 1),
+    Field("kp", 1, KP_DEFAULT),
+    Field("kd", 1),
+)
+"""The randomized parameters the critic sees, in :class:`~gaitlib.envs.randomization.WorldParameters` names."""
+PRIVILEGED: tuple[Field, ...] = (
+    Field("lin_vel_trunk", 3),
+    Field("root_height", 1),
+    Field("phase_sin", 1),
+    Field("phase_cos", 1),
+    *DYNAMICS,
+    Field("push_force", 3, 100.0),  # N
+)
+"""Critic extras."""
+PRIVILEGED_DIM = width(PRIVILEGED)  # 14
 
 
 def layout() -> dict[str, object]:
     """A description of the observation layout, stored with every trained policy and checked on load."""
     return {
-        "frame": ["joint_pos:12", "projected_gravity:3", "ang_vel_trunk:3", "foot_contact:4", "prev_action:12"],
+        "frame": [f"{f.name}:{f.width}" for f in FRAME],
         "history": HISTORY,
         "reference_offsets": list(REFERENCE_OFFSETS),
-        "reference_frame": ["joint_pos:12", "root_height:1", "forward_speed:1"],
+        "reference_frame": [f"{f.name}:{f.width}" for f in REFERENCE_FRAME],
         "actor_dim": ACTOR_OBS_DIM,
         "privileged_dim": PRIVILEGED_DIM,
     }
@@ -68,16 +133,23 @@ def proprioceptive_frame(
     foot contacts (N, 4) and the previous action (N, 12)."""
     down = torch.zeros_like(root_ang_vel)
     down[:, 2] = -1.0
-    gravity = quat_rotate_inverse(root_quat, down)
-    return torch.cat([joint_pos, gravity, root_ang_vel, foot_contact.float(), prev_action], dim=-1)
+    parts = {
+        "joint_pos": joint_pos,
+        "projected_gravity": quat_rotate_inverse(root_quat, down),
+        "ang_vel_trunk": root_ang_vel,
+        "foot_contact": foot_contact.float(),
+        "prev_action": prev_action,
+    }
+    return _assemble(FRAME, parts)
 
 
 def reference_features(frames: list[ReferenceFrame]) -> torch.Tensor:
     """g_t (N, 14 * len(frames)) from the reference at each of the offsets."""
-    parts = []
-    for f in frames:
-        parts += [f.joint_pos, f.root_pos[:, 2:3], f.heading_lin_vel[:, 0:1]]
-    return torch.cat(parts, dim=-1)
+    parts = [
+        {"joint_pos": f.joint_pos, "root_height": f.root_pos[:, 2:3], "forward_speed": f.heading_lin_vel[:, 0:1]}
+        for f in frames
+    ]
+    return torch.cat([_assemble(REFERENCE_FRAME, p) for p in parts], dim=-1)
 
 
 def privileged_features(
@@ -88,17 +160,15 @@ def privileged_features(
     dynamics: torch.Tensor,
     push_force: torch.Tensor,
 ) -> torch.Tensor:
-    """Critic extras (N, 14): ``dynamics`` (N, 5) is (gravity scale, mass scale, friction, kp, kd)."""
+    """Critic extras (N, 14): ``dynamics`` (N, 5) holds the :data:`DYNAMICS` in their SI units, ``push_force``
+    (N, 3) is in N."""
     angle = 2 * torch.pi * phase
-    scaled = dynamics / torch.tensor([1.0, 1.0, 1.0, 60.0, 1.0], device=dynamics.device)
-    return torch.cat(
-        [
-            quat_rotate_inverse(root_quat, root_lin_vel),
-            root_height.unsqueeze(-1),
-            torch.sin(angle).unsqueeze(-1),
-            torch.cos(angle).unsqueeze(-1),
-            scaled,
-            push_force / 100.0,
-        ],
-        dim=-1,
-    )
+    parts = {
+        "lin_vel_trunk": quat_rotate_inverse(root_quat, root_lin_vel),
+        "root_height": root_height.unsqueeze(-1),
+        "phase_sin": torch.sin(angle).unsqueeze(-1),
+        "phase_cos": torch.cos(angle).unsqueeze(-1),
+        "push_force": push_force,
+    }
+    parts |= {f.name: dynamics[:, i : i + 1] for i, f in enumerate(DYNAMICS)}
+    return _assemble(PRIVILEGED, parts)

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import torch
 
+from gaitlib.robots.a1.constants import FOOT_FRICTION, KD_DEFAULT, KD_RANGE, KP_DEFAULT, KP_RANGE
+
 __all__ = ["PushConfig", "PushSchedule", "RandomizationConfig", "WorldParameters", "sample_world_parameters"]
 
 
@@ -14,16 +16,17 @@ class RandomizationConfig:
     """Uniform ranges, re-sampled per world at every reset (paper Table 1). ``enabled=False`` uses nominal values."""
 
     enabled: bool = True
-    """Randomize at all; when off every world gets the midpoint gains, unit scales, nominal friction, no noise."""
+    """Randomize at all; when off every world gets the robot's default gains, unit scales, nominal friction, no
+    noise."""
     gravity_scale: tuple[float, float] = (0.8, 1.2)  # Table 1: gravity, x nominal
     action_noise: float = 0.03  # Table 1: additive uniform noise on actions, +/- rad
     observation_noise: float = 0.03  # Table 1: additive uniform noise on observations, +/-
     mass_scale: tuple[float, float] = (0.85, 1.15)  # Table 1: rigid body mass, x nominal
     friction: tuple[float, float] = (0.25, 1.5)  # Table 1: ground friction coefficient
     latency: tuple[float, float] = (0.0, 0.020)  # Table 1: observation latency, s
-    kp: tuple[float, float] = (45.0, 75.0)  # Table 1: PD stiffness, N m/rad
-    kd: tuple[float, float] = (0.9, 1.8)  # Table 1: PD damping, N m s/rad
-    nominal_friction: float = 0.8  # a1_facts: foot friction, used when randomization is off
+    kp: tuple[float, float] = KP_RANGE  # Table 1: PD stiffness, N m/rad
+    kd: tuple[float, float] = KD_RANGE  # Table 1: PD damping, N m s/rad
+    nominal_friction: float = FOOT_FRICTION  # the model's own friction, used when randomization is off
 
 
 @dataclass
@@ -54,8 +57,8 @@ def sample_world_parameters(cfg: RandomizationConfig, k: int, generator: torch.G
             mass_scale=torch.ones(k),
             friction=torch.full((k,), cfg.nominal_friction),
             latency=torch.zeros(k),
-            kp=torch.full((k,), sum(cfg.kp) / 2),
-            kd=torch.full((k,), sum(cfg.kd) / 2),
+            kp=torch.full((k,), KP_DEFAULT),
+            kd=torch.full((k,), KD_DEFAULT),
         )
     return WorldParameters(
         gravity_scale=_uniform(cfg.gravity_scale, k, generator),

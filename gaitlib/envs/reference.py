@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import torch
 
-from gaitlib.envs.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
 from gaitlib.gaits import ClipFrame, ReferenceClip
+from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
 
 __all__ = ["ReferenceFrame", "ReferenceTracker"]
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import torch
 
-from gaitlib.envs.rotations import quat_angle_between
+from gaitlib.rotations import quat_angle_between
 
 __all__ = ["TerminationConfig", "fallen", "orientation_lost", "too_low"]
 

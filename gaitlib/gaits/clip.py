@@ -17,8 +17,8 @@ import numpy as np
 import torch
 
 from gaitlib.gaits.kinematics import forward_kinematics
-from gaitlib.gaits.quaternions import quat_conjugate, quat_multiply, quat_rotate, quat_to_rotation_vector
 from gaitlib.robots.a1.constants import NUM_JOINTS, NUM_LEGS
+from gaitlib.rotations import quat_conjugate, quat_multiply, quat_rotate, quat_to_rotation_vector
 
 __all__ = ["ClipFrame", "ReferenceClip"]
 

@@ -8,29 +8,28 @@ from __future__ import annotations
 
 from importlib import resources
 
-from gaitlib.errors import UnknownNameError
 from gaitlib.gaits.description import GaitDescription, load_gait_file
+from gaitlib.registry import Registry
 
 __all__ = ["gait_names", "get_gait", "register_gait"]
 
-_GAITS: dict[str, GaitDescription] = {}
+_GAITS: Registry[GaitDescription] = Registry("gait")
 
 
 def register_gait(desc: GaitDescription) -> None:
     """Add ``desc`` to the registry under ``desc.name`` (replacing any gait of that name)."""
-    _GAITS[desc.name] = desc
+    _GAITS.register(desc.name, desc)
 
 
 def get_gait(name: str) -> GaitDescription:
-    """Return the registered gait called ``name``; raises :class:`UnknownNameError` for an unknown name."""
-    if name not in _GAITS:
-        raise UnknownNameError("gait", name, list(_GAITS))
-    return _GAITS[name]
+    """Return the registered gait called ``name``; raises :class:`~gaitlib.errors.UnknownNameError` for an unknown
+    name."""
+    return _GAITS.get(name)
 
 
 def gait_names() -> list[str]:
     """Names of the registered gaits, sorted."""
-    return sorted(_GAITS)
+    return sorted(_GAITS.names())
 
 
 def _register_shipped() -> None:

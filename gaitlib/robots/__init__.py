@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from gaitlib.errors import UnknownNameError
+from gaitlib.registry import Registry
 
 __all__ = ["RobotSpec", "get_robot", "register_robot", "robot_names"]
 
@@ -57,24 +57,23 @@ class RobotSpec:
         return len(self.foot_names)
 
 
-_ROBOTS: dict[str, RobotSpec] = {}
+_ROBOTS: Registry[RobotSpec] = Registry("robot")
 
 
 def register_robot(spec: RobotSpec) -> None:
     """Add ``spec`` to the registry under ``spec.name`` (replacing any robot of that name)."""
-    _ROBOTS[spec.name] = spec
+    _ROBOTS.register(spec.name, spec)
 
 
 def get_robot(name: str = "a1") -> RobotSpec:
-    """Return the registered robot called ``name``; raises :class:`UnknownNameError` for an unknown name."""
-    if name not in _ROBOTS:
-        raise UnknownNameError("robot", name, list(_ROBOTS))
-    return _ROBOTS[name]
+    """Return the registered robot called ``name``; raises :class:`~gaitlib.errors.UnknownNameError` for an unknown
+    name."""
+    return _ROBOTS.get(name)
 
 
 def robot_names() -> list[str]:
     """Names of the registered robots."""
-    return sorted(_ROBOTS)
+    return sorted(_ROBOTS.names())
 
 
 def _register_a1() -> None:

@@ -6,10 +6,10 @@ Backend modules are imported lazily, so importing :mod:`gaitlib.sim` never loads
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 
 from gaitlib.errors import SimulationError, UnknownNameError
+from gaitlib.registry import Registry
 from gaitlib.robots import RobotSpec, get_robot
 from gaitlib.sim.contract import KinematicState, SimBackend, SimState, standing_state
 
@@ -27,20 +27,23 @@ __all__ = [
 BackendFactory = Callable[..., SimBackend]
 """``factory(robot, num_worlds, *, device=None) -> SimBackend``."""
 
-_BACKENDS: dict[str, str | BackendFactory] = {
-    "mujoco": "gaitlib.sim.mujoco_backend:MujocoBackend",
-    "newton": "gaitlib.sim.newton_backend:NewtonBackend",
-}
+_BACKENDS: Registry[BackendFactory] = Registry(
+    "backend",
+    lazy=True,
+    on_import_error=lambda name, error: SimulationError(f"backend '{name}' is not available here: {error}"),
+)
+_BACKENDS.register("mujoco", "gaitlib.sim.mujoco_backend:MujocoBackend")
+_BACKENDS.register("newton", "gaitlib.sim.newton_backend:NewtonBackend")
 
 
 def register_backend(name: str, factory: str | BackendFactory) -> None:
     """Register a backend factory, or a ``"module:attribute"`` path to one that is imported on first use."""
-    _BACKENDS[name] = factory
+    _BACKENDS.register(name, factory)
 
 
 def backend_names() -> list[str]:
     """Names accepted by :func:`make_backend` (``auto`` included)."""
-    return ["auto", *sorted(_BACKENDS)]
+    return ["auto", *sorted(_BACKENDS.names())]
 
 
 def resolve_backend_name(name: str) -> str:
@@ -52,19 +55,6 @@ def resolve_backend_name(name: str) -> str:
     if name not in _BACKENDS:
         raise UnknownNameError("backend", name, backend_names())
     return name
-
-
-def _factory(name: str) -> BackendFactory:
-    factory = _BACKENDS[name]
-    if isinstance(factory, str):
-        module_name, attr = factory.split(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as error:
-            raise SimulationError(f"backend '{name}' is not available here: {error}") from error
-        factory = getattr(module, attr)
-        _BACKENDS[name] = factory
-    return factory
 
 
 def make_backend(
@@ -84,4 +74,4 @@ def make_backend(
     spec = get_robot(robot) if isinstance(robot, str) else robot
     if not spec.mjcf_path.is_file():
         raise SimulationError(f"robot model file not found: {spec.mjcf_path}")
-    return _factory(resolve_backend_name(name))(spec, num_worlds, device=device)
+    return _BACKENDS.get(resolve_backend_name(name))(spec, num_worlds, device=device)

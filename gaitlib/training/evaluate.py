@@ -8,8 +8,8 @@ import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.gaits import ReferenceClip
+from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import make_backend
 from gaitlib.training.policy import GaitPolicy
 

@@ -1,7 +1,9 @@
 """Unitree A1 constants: the one place every other module takes the robot's numbers from.
 
-Each number cites its source: ``facts`` is ``shared/docs/a1_facts.md`` (Unitree's public URDF, as also used by
-MuJoCo Menagerie and motion_imitation); ``paper`` is Christmann et al., Table 1; ``choice`` is gaitlib's own,
+Each number cites its source: ``facts`` is Unitree's public A1 description (the URDF in
+github.com/unitreerobotics/unitree_ros, ``robots/a1_description``), as also used by MuJoCo Menagerie
+(github.com/google-deepmind/mujoco_menagerie, ``unitree_a1``) and motion_imitation
+(github.com/erwincoumans/motion_imitation); ``paper`` is Christmann et al., Table 1; ``choice`` is gaitlib's own,
 with the reason beside it. Units are SI (m, kg, rad, N·m, s). Body frame: x forward, y left, z up.
 """
 
@@ -14,6 +16,7 @@ __all__ = [
     "CALF_LIMITS",
     "CONTROL_HZ",
     "DEFAULT_JOINT_POS",
+    "FOOT_FRICTION",
     "FOOT_NAMES",
     "FOOT_RADIUS",
     "HIP_OFFSETS",
@@ -61,6 +64,7 @@ HIP_OFFSETS: tuple[tuple[float, float, float], ...] = (
 THIGH_OFFSET_Y: tuple[float, ...] = (-0.08505, 0.08505, -0.08505, 0.08505)  # thigh joint from hip joint, y
 LINK_LENGTH: float = 0.2  # thigh and calf length, m
 FOOT_RADIUS: float = 0.02  # contact sphere radius, m
+FOOT_FRICTION: float = 0.8  # facts: sliding friction of the feet and the ground (the MJCF's geom friction)
 
 # Joint limits, rad (facts).
 ABDUCTION_LIMITS: tuple[float, float] = (-0.802851, 0.802851)
