@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 
@@ -10,17 +11,23 @@ from cli_runner import gaitlib
 
 
 def test_train_then_eval_json(tmp_path) -> None:
-    library, runs = str(tmp_path / "library"), str(tmp_path / "runs")
+    library, runs = tmp_path / "library", str(tmp_path / "runs")
     trained = gaitlib(
-        "train", "stand", "--iterations", "1", "--eval-episodes", "2", "--library", library, "--run-dir", runs
+        "train", "stand", "--preset", "tiny", "--iterations", "2", "--seed", "3", "--eval-episodes", "2",
+        "--library", str(library), "--run-dir", runs,
     )
     assert trained.returncode == 0, trained.stderr
-    assert "wrote" in trained.stderr and "fall rate" in trained.stderr
-    evaluated = gaitlib("eval", "stand", "--library", library, "--episodes", "3", "--seconds", "0.5", "--json")
+    assert "after 2 iterations, 64 samples" in trained.stderr and "fall rate" in trained.stderr
+    meta = json.loads((library / "stand" / "metadata.json").read_text())
+    assert meta["training"]["preset"]["name"] == "tiny" and meta["training"]["iterations"] == 2
+    assert [row[0] for row in meta["training"]["curve"]["rows"]] == [1, 2]
+    # The training evaluation (2 episodes x 20 s, seed + 1) is reproduced exactly by the saved policy in a new
+    # process: the entry holds the trained weights and normalizer, and evaluation depends on its seed alone.
+    evaluated = gaitlib("eval", "stand", "--library", str(library), "--episodes", "2", "--seed", "4", "--json")
     assert evaluated.returncode == 0, evaluated.stderr
     report = json.loads(evaluated.stdout)
-    assert report["gait"] == "stand" and report["episodes"] == 3
-    assert 0.0 <= report["fall_rate"] <= 1.0 and report["joint_rmse"] >= 0.0
+    assert report == {"gait": "stand"} | meta["evaluation"]
+    assert report["episodes"] == 2 and report["seconds"] == 20.0 and math.isfinite(report["joint_rmse"])
 
 
 def test_unknown_gait_is_one_error_line(tmp_path) -> None:
@@ -51,8 +58,8 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
     import torch
 
     library, runs = tmp_path / "library", tmp_path / "runs"
-    args = ["train", "stand", "--iterations", "1000", "--checkpoint-every", "1", "--eval-episodes", "2",
-            "--library", str(library), "--run-dir", str(runs)]
+    args = ["train", "stand", "--preset", "tiny", "--iterations", "100000", "--checkpoint-every", "1",
+            "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs)]
     process = subprocess.Popen(
         [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
         stdout=subprocess.PIPE,
@@ -68,8 +75,9 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
     assert process.returncode == 130
     assert stderr.strip().splitlines()[-1].startswith("gaitlib: interrupted; finished work is saved")
     saved = torch.load(latest, weights_only=False)
-    assert saved["iteration"] >= 1 and not (library / "stand").exists()
-    resumed = gaitlib("train", "stand", "--iterations", str(saved["iteration"] + 1), "--resume",
+    done = saved["iter"]
+    assert done >= 1 and saved["infos"]["samples"] == done * 32 and not (library / "stand").exists()
+    resumed = gaitlib("train", "stand", "--preset", "tiny", "--iterations", str(done + 1), "--resume",
                       "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs))
     assert resumed.returncode == 0, resumed.stderr
-    assert f"after {saved['iteration'] + 1} iterations" in resumed.stderr
+    assert f"after {done + 1} iterations, {(done + 1) * 32:,} samples" in resumed.stderr

@@ -30,7 +30,9 @@ def train_command(
     gait: str = typer.Argument(
         ..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."
     ),
-    preset: str = typer.Option("cpu", "--preset", help="cpu (tuned for a 2-core CPU) or paper (Table 2)."),
+    preset: str = typer.Option(
+        "cpu", "--preset", help="cpu (tuned for a 2-core CPU), paper (Table 2) or tiny (the tests': learns nothing)."
+    ),
     iterations: int | None = typer.Option(None, "--iterations", help="PPO iterations (default: the preset's)."),
     minutes: float | None = typer.Option(None, "--minutes", help="Stop after this much training time, min."),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
