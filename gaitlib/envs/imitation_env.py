@@ -28,11 +28,10 @@ from gaitlib.envs.randomization import (
     WorldParameters,
     sample_world_parameters,
 )
-from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
-from gaitlib.envs.rewards import RewardConfig
+from gaitlib.envs.reference import ReferenceTracker
+from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.gaits import ReferenceClip
-from gaitlib.rotations import quat_angle_between, quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import KinematicState, SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
@@ -48,8 +47,8 @@ class EnvConfig:
     """PD target = reference joint angles one step ahead + action_scale * action, rad per action unit."""
     action_clip: float = 4.0
     """Actions are clipped to +/- this many units before scaling."""
-    reward: RewardConfig = field(default_factory=RewardConfig)
-    """Imitation reward weights and scales."""
+    reward: tuple[RewardTerm, ...] = IMITATION_REWARD
+    """Imitation reward terms, weights and scales."""
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     """Early termination thresholds."""
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
@@ -95,7 +94,7 @@ class ImitationEnv(VecEnv):
         self._params = sample_world_parameters(cfg.randomization, n, self._gen)
         self._dynamics = torch.zeros(n, obs_fn.width(obs_fn.DYNAMICS), device=dev)  # what the critic sees
         self._state: SimState = backend.state()
-        self._terms = {name: torch.zeros(n, device=dev) for name in cfg.reward.terms()}
+        self._terms = {term.name: torch.zeros(n, device=dev) for term in cfg.reward}
         self._obs: TensorDict | None = None
         self.reset_worlds(torch.arange(n, device=dev))
 
@@ -122,7 +121,7 @@ class ImitationEnv(VecEnv):
         self._state = state = self.backend.state()
 
         ref = self.reference.frame()
-        reward = self._reward(state, ref)
+        reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
         terminated = diverged | fallen(
             state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination
         )
@@ -287,32 +286,3 @@ class ImitationEnv(VecEnv):
             self.push_force[ids],
         )
         return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[len(actor)])
-
-    def _reward(self, s: SimState, ref: ReferenceFrame) -> torch.Tensor:
-        c = self.cfg.reward
-        heading = quat_from_yaw(yaw_of(s.root_quat)).unsqueeze(1)
-        feet = quat_rotate_inverse(heading, s.foot_pos - s.root_pos.unsqueeze(1))
-        self._terms["pose"] = rew_fn.pose_reward(s.joint_pos, ref.joint_pos, scale=c.pose_scale)
-        self._terms["joint_velocity"] = rew_fn.joint_velocity_reward(
-            s.joint_vel, ref.joint_vel, scale=c.joint_velocity_scale
-        )
-        self._terms["end_effector"] = rew_fn.end_effector_reward(
-            feet, ref.foot_pos_heading, scale=c.end_effector_scale, height_weight=c.end_effector_height_weight
-        )
-        self._terms["root_pose"] = rew_fn.root_pose_reward(
-            s.root_pos,
-            ref.root_pos,
-            quat_angle_between(s.root_quat, ref.root_quat),
-            scale=c.root_pose_scale,
-            rotation_weight=c.root_rotation_weight,
-        )
-        self._terms["root_velocity"] = rew_fn.root_velocity_reward(
-            s.root_lin_vel,
-            ref.root_lin_vel,
-            s.root_ang_vel,
-            ref.root_ang_vel,
-            scale=c.root_velocity_scale,
-            angular_weight=c.root_angular_velocity_weight,
-        )
-        weights = c.terms()
-        return sum(weights[name] * value for name, value in self._terms.items())

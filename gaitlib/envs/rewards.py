@@ -1,98 +1,93 @@
-"""Motion-imitation reward (Peng et al. 2020): small pure functions, weights and scales kept in RewardConfig.
+"""Motion-imitation reward (Peng et al. 2020, "Learning Agile Robotic Locomotion Skills by Imitating Animals"):
+terms declared once, as (name, error, weight, scale), in :data:`IMITATION_REWARD`.
 
-Each term is ``exp(-scale * error)`` in [0, 1]; the reward is the weighted sum. All tensors are batched over N
-worlds; errors are computed in each robot's heading frame where a frame matters.
+Each term is ``exp(-scale * error)`` in [0, 1], its error computed from the robot's readings and its reference;
+the reward is the weighted sum. Adding a term is one error function and one line in the declaration. All tensors
+are batched over N worlds; errors are taken in each robot's heading frame where a frame matters.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import torch
 
+from gaitlib.envs.reference import ReferenceFrame
+from gaitlib.rotations import quat_angle_between, quat_from_yaw, quat_rotate_inverse, yaw_of
+from gaitlib.sim import SimState
+
 __all__ = [
-    "RewardConfig",
-    "end_effector_reward",
-    "joint_velocity_reward",
-    "pose_reward",
-    "root_pose_reward",
-    "root_velocity_reward",
+    "IMITATION_REWARD",
+    "RewardTerm",
+    "end_effector_error",
+    "joint_velocity_error",
+    "pose_error",
+    "reward",
+    "root_pose_error",
+    "root_velocity_error",
 ]
 
 
-@dataclass(frozen=True, kw_only=True)
-class RewardConfig:
-    """Weights and scales of the imitation reward terms (Peng et al. 2020, as in the paper)."""
+@dataclass(frozen=True)
+class RewardTerm:
+    """One imitation reward term, ``weight * exp(-scale * error)``."""
 
-    pose_weight: float = 0.5
-    pose_scale: float = 5.0
-    joint_velocity_weight: float = 0.05
-    joint_velocity_scale: float = 0.1
-    end_effector_weight: float = 0.2
-    end_effector_scale: float = 40.0
-    end_effector_height_weight: float = 3.0
-    """Weight of the vertical foot error against the horizontal one."""
-    root_pose_weight: float = 0.15
-    root_pose_scale: float = 20.0
-    root_rotation_weight: float = 0.5
-    """Weight of the squared orientation error (rad^2) against the squared position error (m^2)."""
-    root_velocity_weight: float = 0.1
-    root_velocity_scale: float = 2.0
-    root_angular_velocity_weight: float = 0.1
-    """Weight of the squared angular velocity error against the squared linear velocity error."""
-
-    def terms(self) -> dict[str, float]:
-        """Term name -> weight."""
-        return {
-            "pose": self.pose_weight,
-            "joint_velocity": self.joint_velocity_weight,
-            "end_effector": self.end_effector_weight,
-            "root_pose": self.root_pose_weight,
-            "root_velocity": self.root_velocity_weight,
-        }
+    name: str
+    """Logged as ``/reward/<name>``."""
+    error: Callable[[SimState, ReferenceFrame], torch.Tensor]
+    """(N,) non-negative tracking error of each world."""
+    weight: float
+    """Share of the term in the reward (the weights of a reward sum to 1)."""
+    scale: float
+    """Sharpness, per unit of the error."""
 
 
-def pose_reward(joint_pos: torch.Tensor, ref_joint_pos: torch.Tensor, *, scale: float) -> torch.Tensor:
-    """exp(-scale * sum_j (q_ref - q)^2); joint angles (N, J) in rad."""
-    return torch.exp(-scale * (ref_joint_pos - joint_pos).square().sum(-1))
+def pose_error(s: SimState, ref: ReferenceFrame) -> torch.Tensor:
+    """sum_j (q_ref - q)^2, joint angles in rad."""
+    return (ref.joint_pos - s.joint_pos).square().sum(-1)
 
 
-def joint_velocity_reward(joint_vel: torch.Tensor, ref_joint_vel: torch.Tensor, *, scale: float) -> torch.Tensor:
-    """exp(-scale * sum_j (qd_ref - qd)^2); joint velocities (N, J) in rad/s."""
-    return torch.exp(-scale * (ref_joint_vel - joint_vel).square().sum(-1))
+def joint_velocity_error(s: SimState, ref: ReferenceFrame) -> torch.Tensor:
+    """sum_j (qd_ref - qd)^2, joint velocities in rad/s."""
+    return (ref.joint_vel - s.joint_vel).square().sum(-1)
 
 
-def end_effector_reward(
-    foot_pos: torch.Tensor, ref_foot_pos: torch.Tensor, *, scale: float, height_weight: float
-) -> torch.Tensor:
-    """exp(-scale * sum_feet (dx^2 + dy^2 + height_weight dz^2)); feet (N, F, 3) relative to the trunk, heading
-    frame, m."""
-    error = (ref_foot_pos - foot_pos).square()
-    weighted = error[..., 0] + error[..., 1] + height_weight * error[..., 2]
-    return torch.exp(-scale * weighted.sum(-1))
+def end_effector_error(s: SimState, ref: ReferenceFrame, *, height_weight: float) -> torch.Tensor:
+    """sum_feet (dx^2 + dy^2 + height_weight dz^2) of the feet relative to the trunk in the robot's heading frame,
+    m^2."""
+    heading = quat_from_yaw(yaw_of(s.root_quat)).unsqueeze(1)
+    feet = quat_rotate_inverse(heading, s.foot_pos - s.root_pos.unsqueeze(1))
+    error = (ref.foot_pos_heading - feet).square()
+    return (error[..., 0] + error[..., 1] + height_weight * error[..., 2]).sum(-1)
 
 
-def root_pose_reward(
-    root_pos: torch.Tensor,
-    ref_root_pos: torch.Tensor,
-    rotation_error: torch.Tensor,
-    *,
-    scale: float,
-    rotation_weight: float,
-) -> torch.Tensor:
-    """exp(-scale * (|p_ref - p|^2 + rotation_weight * angle^2)); positions (N, 3) m, ``rotation_error`` (N,) rad."""
-    return torch.exp(-scale * ((ref_root_pos - root_pos).square().sum(-1) + rotation_weight * rotation_error.square()))
+def root_pose_error(s: SimState, ref: ReferenceFrame, *, rotation_weight: float) -> torch.Tensor:
+    """|p_ref - p|^2 (m^2) + rotation_weight * angle^2 (rad^2) of the trunk."""
+    angle = quat_angle_between(s.root_quat, ref.root_quat)
+    return (ref.root_pos - s.root_pos).square().sum(-1) + rotation_weight * angle.square()
 
 
-def root_velocity_reward(
-    lin_vel: torch.Tensor,
-    ref_lin_vel: torch.Tensor,
-    ang_vel: torch.Tensor,
-    ref_ang_vel: torch.Tensor,
-    *,
-    scale: float,
-    angular_weight: float,
-) -> torch.Tensor:
-    """exp(-scale * (|v_ref - v|^2 + angular_weight |w_ref - w|^2)); (N, 3) m/s and rad/s in one common frame."""
-    error = (ref_lin_vel - lin_vel).square().sum(-1) + angular_weight * (ref_ang_vel - ang_vel).square().sum(-1)
-    return torch.exp(-scale * error)
+def root_velocity_error(s: SimState, ref: ReferenceFrame, *, angular_weight: float) -> torch.Tensor:
+    """|v_ref - v|^2 ((m/s)^2, world frame) + angular_weight |w_ref - w|^2 ((rad/s)^2, trunk frame)."""
+    linear = (ref.root_lin_vel - s.root_lin_vel).square().sum(-1)
+    return linear + angular_weight * (ref.root_ang_vel - s.root_ang_vel).square().sum(-1)
+
+
+IMITATION_REWARD: tuple[RewardTerm, ...] = (
+    RewardTerm("pose", pose_error, 0.5, 5.0),
+    RewardTerm("joint_velocity", joint_velocity_error, 0.05, 0.1),
+    RewardTerm("end_effector", partial(end_effector_error, height_weight=3.0), 0.2, 40.0),
+    RewardTerm("root_pose", partial(root_pose_error, rotation_weight=0.5), 0.15, 20.0),
+    RewardTerm("root_velocity", partial(root_velocity_error, angular_weight=0.1), 0.1, 2.0),
+)
+"""The paper's terms, weights and scales (Peng et al. 2020, as in Christmann et al.)."""
+
+
+def reward(
+    terms: tuple[RewardTerm, ...], s: SimState, ref: ReferenceFrame
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """The reward (N,) and each term's value (N,) in [0, 1], by name."""
+    values = {t.name: torch.exp(-t.scale * t.error(s, ref)) for t in terms}
+    return sum(t.weight * values[t.name] for t in terms), values
