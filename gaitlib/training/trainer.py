@@ -128,7 +128,10 @@ class _IterationLog(Logger):
         self.term_sums: dict[str, float] = {}
         self.losses: dict[str, float] = {}
 
-    def process_env_step(self, rewards, dones, extras, intrinsic_rewards=None) -> None:
+    def process_env_step(
+        self, rewards: torch.Tensor, dones: torch.Tensor, extras: dict, intrinsic_rewards: torch.Tensor | None = None
+    ) -> None:
+        """Add one control step of all worlds: mean reward, finished episodes' lengths, reward terms."""
         self.steps += 1
         self.reward_sum += float(rewards.mean())
         if dones.any():
@@ -139,6 +142,7 @@ class _IterationLog(Logger):
                 self.term_sums[name] = self.term_sums.get(name, 0.0) + float(value)
 
     def log(self, *, collect_time: float, learn_time: float, loss_dict: dict, **_) -> None:
+        """Keep the iteration's time (collection and update, s) and PPO losses."""
         self.seconds = collect_time + learn_time
         self.losses = {name: float(value) for name, value in loss_dict.items()}
 
