@@ -14,7 +14,7 @@ import torch
 
 from gaitlib.envs import ImitationEnv
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
-from gaitlib.training.policy import GaitPolicy
+from gaitlib.training.policy import GaitPolicy, per_gait
 
 __all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchEvent"]
 
@@ -138,7 +138,7 @@ class MetaController:
                         )
                     )
                 self.queued[chosen] = -1
-        actions = self._per_gait(env.gait, "act", env.get_observations())
+        actions = per_gait(self.policies, env.gait, env.get_observations())
         _, _, dones, extras = env.step(actions)
         fell = dones & ~extras["time_outs"]
         self.queued[dones] = -1
@@ -154,24 +154,13 @@ class MetaController:
             source=source,
             dest=dest,
             phase_source=env.phase[ids],
-            latent=self._per_gait(source, "latent", obs),
+            latent=per_gait(self.policies, source, obs, method="latent"),
             candidates=self.candidates,
         )
         if self.strategy.needs_value:
             c = len(self.candidates)
             preview = env.preview_switch(ids, dest, self.candidates)
-            values = self._per_gait(dest.repeat_interleave(c), "value", preview).reshape(len(ids), c)
+            values = per_gait(self.policies, dest.repeat_interleave(c), preview, method="value")
+            values = values.reshape(len(ids), c)
             query.dest_value = values / self.typical_value[dest].unsqueeze(1)
         return self.strategy.decide(query), query
-
-    def _per_gait(self, gait: torch.Tensor, method: str, obs) -> torch.Tensor:
-        """``policy.method(rows)`` of each row's gait (one call per gait present)."""
-        out = None
-        for g in torch.unique(gait).tolist():
-            rows = (gait == g).nonzero().squeeze(1)
-            values = getattr(self.policies[g], method)(obs[rows])
-            if out is None:
-                out = torch.empty((len(gait), *values.shape[1:]), dtype=values.dtype, device=values.device)
-            out[rows] = values
-        assert out is not None
-        return out

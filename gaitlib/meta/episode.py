@@ -7,9 +7,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from gaitlib.envs import EnvConfig
+from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
-from gaitlib.meta.controller import DEADLINE_S, SwitchEvent
+from gaitlib.errors import GaitlibError
+from gaitlib.meta.controller import DEADLINE_S, MetaStep, SwitchEvent
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.sim import make_backend
 
@@ -81,19 +82,11 @@ def run_episode(
     request until ``deadline_s`` after it (the benchmark's window). Stops at ``seconds`` or at a fall."""
     m, n = setup.gait_index(source), setup.gait_index(dest)
     if m == n:
-        from gaitlib.errors import GaitlibError
-
         raise GaitlibError(f"--from and --to are both '{source}'")
     sim = make_backend(backend, num_worlds=1)
     try:
-        env = setup.make_env(
-            sim,
-            EnvConfig(
-                episode_seconds=seconds + 1.0,
-                pushes=PushConfig(max_force=push_n, fixed_force=True, interval=DISTURBANCE_INTERVAL_S),
-            ),
-            seed=seed,
-        )
+        pushes = PushConfig(max_force=push_n, fixed_force=True, interval=DISTURBANCE_INTERVAL_S)
+        env = setup.make_env(sim, EnvConfig(episode_seconds=seconds + 1.0, pushes=pushes), seed=seed)
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
         world = torch.zeros(1, dtype=torch.long, device=env.device)
         env.reset_worlds(world, gait=torch.tensor([m], device=env.device))
@@ -111,8 +104,7 @@ def run_episode(
             request_s=request_s,
             push_n=push_n,
         )
-        names = ("time", "active", "score", "phase", "height", "push", "contact", "qpos")
-        rows: dict[str, list] = {k: [] for k in names}
+        rows: dict[str, list] = {name: [] for name in _ROWS}
         request_step = round(request_s / env.dt)
         push_start = max(0, request_step - round(DISTURBANCE_LEAD_S / env.dt))
         push_end = request_step + round(deadline_s / env.dt)
@@ -130,23 +122,34 @@ def run_episode(
             if bool(result.fell[0]):
                 trace.fell_s = (step + 1) * env.dt
                 break
-            s = env.sim_state
-            rows["time"].append((step + 1) * env.dt)
-            rows["active"].append(active if not result.events else n)
-            rows["score"].append(float(result.best_score[0]))
-            rows["phase"].append(float(result.best_phase[0]))
-            rows["height"].append(float(s.root_pos[0, 2]))
-            rows["push"].append(float(env.push_force[0].norm()))
-            rows["contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
-            rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
-        trace.time_s = np.asarray(rows["time"])
-        trace.active = np.asarray(rows["active"], dtype=np.int64)
-        trace.score = np.asarray(rows["score"])
-        trace.best_phase = np.asarray(rows["phase"])
-        trace.root_height = np.asarray(rows["height"])
-        trace.push = np.asarray(rows["push"])
-        trace.foot_contact = np.asarray(rows["contact"], dtype=bool).reshape(-1, 4)
-        trace.qpos = np.asarray(rows["qpos"]).reshape(len(rows["qpos"]), -1)
+            _record(rows, env, result, time_s=(step + 1) * env.dt, active=n if result.events else active)
+        _fill(trace, rows)
         return trace
     finally:
         sim.close()
+
+
+_ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "qpos")
+"""The per-step fields of :class:`RunTrace`."""
+
+
+def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_s: float, active: int) -> None:
+    """Append one control step of the single world to ``rows``."""
+    s = env.sim_state
+    rows["time_s"].append(time_s)
+    rows["active"].append(active)
+    rows["score"].append(float(result.best_score[0]))
+    rows["best_phase"].append(float(result.best_phase[0]))
+    rows["root_height"].append(float(s.root_pos[0, 2]))
+    rows["push"].append(float(env.push_force[0].norm()))
+    rows["foot_contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
+    rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
+
+
+def _fill(trace: RunTrace, rows: dict[str, list]) -> None:
+    """Give ``trace`` the recorded steps as arrays."""
+    for name, values in rows.items():
+        setattr(trace, name, np.asarray(values))
+    trace.active = trace.active.astype(np.int64)
+    trace.foot_contact = trace.foot_contact.astype(bool).reshape(-1, 4)
+    trace.qpos = trace.qpos.reshape(len(rows["qpos"]), -1)

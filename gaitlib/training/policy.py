@@ -6,13 +6,16 @@ the deterministic action, the actor's last hidden layer (the latent psi) and the
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Literal
+
 import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from gaitlib.envs import observations as obs_fn
 
-__all__ = ["GaitPolicy", "build_models"]
+__all__ = ["GaitPolicy", "build_models", "per_gait"]
 
 OBS_GROUPS = {"actor": ["policy"], "critic": ["policy", "privileged"]}
 
@@ -84,3 +87,24 @@ class GaitPolicy(torch.nn.Module):
     def value(self, obs: TensorDict) -> torch.Tensor:
         """(N,) critic value."""
         return self.critic(obs).squeeze(-1)
+
+
+def per_gait(
+    policies: Sequence[GaitPolicy],
+    gait: torch.Tensor,
+    obs: TensorDict,
+    *,
+    method: Literal["act", "latent", "value"] = "act",
+) -> torch.Tensor:
+    """``policies[gait[i]].<method>(obs[i])`` for every row i (at least one), one call per gait present: the
+    actions, latents or values of worlds that each follow their own gait's policy."""
+    out = None
+    for g in torch.unique(gait).tolist():
+        rows = (gait == g).nonzero().squeeze(1)
+        values = getattr(policies[g], method)(obs[rows])
+        if out is None:
+            out = torch.empty((len(gait), *values.shape[1:]), dtype=values.dtype, device=values.device)
+        out[rows] = values
+    if out is None:
+        raise ValueError("per_gait needs at least one row")
+    return out
