@@ -1,0 +1,67 @@
+"""Run a gaitlib policy in a plain MuJoCo loop from its library entry alone (policy.onnx and metadata.json).
+
+Only MuJoCo, onnxruntime and numpy: every fact comes from the entry's ``deployment`` block (docs/deploying.md).
+Usage: python examples/deploy_onnx.py MODEL.xml library/trot [SECONDS]
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import onnxruntime
+
+__all__ = ["deploy"]
+
+
+def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
+    """Drive the robot of ``m`` from the state in ``d``; yields (observation, action) before each control step."""
+    dep = json.loads((Path(entry) / "metadata.json").read_text())["deployment"]
+    robot, ctl, obs, ref, act = (dep[k] for k in ("robot", "control", "observation", "reference", "action"))
+    joints = [m.joint(name) for name in robot["joint_names"]]
+    q, servo = [j.qposadr[0] for j in joints], [list(m.actuator_trnid[:, 0]).index(j.id) for j in joints]
+    m.opt.timestep = ctl["physics_timestep_s"]  # the PD servo: tau = clip(kp (target - q) - kd qdot, +/- limit)
+    m.actuator_biastype[servo], m.actuator_forcelimited[servo] = mujoco.mjtBias.mjBIAS_AFFINE, 1
+    m.actuator_gainprm[servo, 0], m.actuator_biasprm[servo, :3] = ctl["kp"], [0.0, -ctl["kp"], -ctl["kd"]]
+    m.actuator_forcerange[servo] = [-ctl["torque_limit"], ctl["torque_limit"]]
+    feet = [m.geom(name).id for name in robot["foot_names"]]
+    ground = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)
+    rows, last, step = np.array(ref["rows"]), len(ref["rows"]) - 1, ref["phase_per_step"]
+    joint_cols = next(slice(c["start"], c["start"] + c["size"]) for c in ref["columns"] if c["name"] == "joint_pos")
+
+    def row(phase: float) -> np.ndarray:  # the reference at a phase, linearly interpolated
+        x = (phase % 1.0 if ref["loop"] else min(max(phase, 0.0), 1.0)) * last
+        i = min(int(x), last - 1)
+        return rows[i] + (x - i) * (rows[i + 1] - rows[i])
+
+    policy = onnxruntime.InferenceSession(str(Path(entry) / "policy.onnx"))
+    action, phase, history, rot = np.zeros(len(q)), 0.0, [], np.zeros(9)
+    mujoco.mj_forward(m, d)
+    for _ in range(round(seconds * ctl["rate_hz"])):
+        mujoco.mju_quat2Mat(rot, d.qpos[3:7])  # trunk-to-world rotation R, row-major: R^T (0, 0, -1) = -R[2]
+        touching = set(d.contact.geom[np.isin(d.contact.geom, ground).any(axis=1)].ravel())
+        values = {"joint_pos": d.qpos[q], "projected_gravity": -rot[6:9], "ang_vel_trunk": d.qvel[3:6],
+                  "foot_contact": [float(f in touching) for f in feet], "prev_action": action}
+        frame = np.concatenate([np.asarray(values[s["name"]]) / s["divided_by"] for s in obs["frame"]])
+        history = [frame] * obs["history"]["frames"] if not history else [frame] + history[:-1]  # newest first
+        o = np.concatenate(history + [row(phase + k * step) for k in ref["offsets_steps"]]).astype(np.float32)
+        action = np.clip(policy.run(None, {dep["onnx"]["inputs"][0]["name"]: o[None]})[0][0], -act["clip"], act["clip"])
+        yield o, action
+        target = row(phase + step)[joint_cols] + act["scale"] * action  # the reference one control step ahead
+        d.ctrl[servo] = np.clip(target, robot["joint_lower"], robot["joint_upper"])
+        mujoco.mj_step(m, d, ctl["substeps"])
+        phase += step
+
+
+if __name__ == "__main__":
+    model, entry_dir = mujoco.MjModel.from_xml_path(sys.argv[1]), Path(sys.argv[2])
+    block = json.loads((entry_dir / "metadata.json").read_text())["deployment"]
+    ref = block["reference"]
+    first = {c["name"]: ref["rows"][0][c["start"] : c["start"] + c["size"]] for c in ref["columns"]}
+    data = mujoco.MjData(model)  # start upright and at rest in the reference pose at phase 0
+    data.qpos[2], data.qpos[3:7] = first["root_height"][0], [1.0, 0.0, 0.0, 0.0]
+    data.qpos[[model.joint(name).qposadr[0] for name in block["robot"]["joint_names"]]] = first["joint_pos"]
+    for _ in deploy(model, data, entry_dir, float(sys.argv[3]) if len(sys.argv) > 3 else 10.0):
+        pass
+    print(f"after the run the trunk is {data.qpos[2]:.3f} m high and {data.qpos[0]:.2f} m ahead")

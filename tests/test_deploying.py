@@ -1,0 +1,110 @@
+"""The deployment contract: the loop of docs/deploying.md, run from an entry folder alone, sees what the environment
+sees and keeps the A1 up; the doc shows exactly that loop."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import shutil
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs.randomization import RandomizationConfig, sample_world_parameters
+from gaitlib.gaits import GaitDescription, clip_from_description
+from gaitlib.robots import get_robot
+from gaitlib.sim import make_backend
+from gaitlib.training import default_library_dir
+from gaitlib.training.deployment import deployment_block
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "deploy_onnx.py"
+
+
+def _load_example():
+    spec = importlib.util.spec_from_file_location("deploy_onnx", EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _block(gait: str, onnx_path: Path) -> dict:
+    meta = json.loads((default_library_dir() / gait / "metadata.json").read_text())
+    clip = clip_from_description(GaitDescription(**meta["description"]))
+    return deployment_block(clip=clip, action=meta["action"], onnx_path=onnx_path)
+
+
+@pytest.fixture(scope="module")
+def trot_entry(tmp_path_factory) -> Path:
+    """The shipped trot policy.onnx beside a metadata.json holding nothing but the deployment block."""
+    entry = tmp_path_factory.mktemp("entry") / "trot"
+    entry.mkdir()
+    shutil.copy(default_library_dir() / "trot" / "policy.onnx", entry / "policy.onnx")
+    block = _block("trot", entry / "policy.onnx")
+    (entry / "metadata.json").write_text(json.dumps({"deployment": block}))
+    return entry
+
+
+def test_the_doc_shows_the_example_verbatim() -> None:
+    doc = (ROOT / "docs" / "deploying.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", doc, flags=re.DOTALL)
+    assert EXAMPLE.read_text() in blocks
+
+
+def test_the_loop_sees_what_the_environment_sees_and_the_robot_stays_up(trot_entry: Path) -> None:
+    """From the environment's start state (no randomization, phase 0), the loop's observations equal the
+    environment's while both take the loop's actions; over two seconds the trunk stays high and upright."""
+    clip = clip_from_description(GaitDescription(**json.loads(
+        (default_library_dir() / "trot" / "metadata.json").read_text())["description"]))
+    sim = make_backend("mujoco", num_worlds=1)
+    cfg = EnvConfig(episode_seconds=100.0, randomization=RandomizationConfig(enabled=False), random_start_phase=False)
+    env = ImitationEnv(sim, [clip], cfg)
+    try:
+        s = env.sim_state
+        model = mujoco.MjModel.from_xml_path(str(get_robot("a1").mjcf_path))
+        data = mujoco.MjData(model)
+        data.qpos[:] = torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).double().numpy()
+        data.qvel[:] = torch.cat([s.root_lin_vel[0], s.root_ang_vel[0], s.joint_vel[0]]).double().numpy()
+        heights, uprightness = [], []
+        for step, (obs, action) in enumerate(_load_example().deploy(model, data, trot_entry, 2.0)):
+            if step < 10:
+                expected = env.get_observations()["policy"][0].numpy()
+                np.testing.assert_allclose(obs, expected, atol=1e-5, err_msg=f"control step {step}")
+                env.step(torch.as_tensor(action, dtype=torch.float32).unsqueeze(0))
+            heights.append(data.qpos[2])
+            uprightness.append(-obs[14])  # projected gravity z of the newest frame
+        assert step + 1 == 60
+        assert min(heights) > 0.2 and min(uprightness) > 0.9
+        assert data.qpos[0] > 0.5  # it trots forward (0.5 m/s reference)
+    finally:
+        sim.close()
+
+
+def test_the_block_states_the_numbers_the_environment_uses(trot_entry: Path) -> None:
+    block = json.loads((trot_entry / "metadata.json").read_text())["deployment"]
+    env_cfg = EnvConfig()
+    robot = get_robot("a1")
+    assert block["control"]["rate_hz"] * block["control"]["substeps"] * block["control"]["physics_timestep_s"] == 1
+    model = mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
+    assert block["control"]["physics_timestep_s"] == pytest.approx(model.opt.timestep, abs=1e-12)
+    nominal = sample_world_parameters(RandomizationConfig(enabled=False), 1, torch.Generator())
+    assert (block["control"]["kp"], block["control"]["kd"]) == pytest.approx((nominal.kp.item(), nominal.kd.item()))
+    assert (block["action"]["scale"], block["action"]["clip"]) == (env_cfg.action_scale, env_cfg.action_clip)
+    assert block["robot"]["joint_names"] == [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)]
+    assert block["observation"]["gravity"]["upright_value"] == [0.0, 0.0, -1.0]
+    assert block["onnx"]["inputs"][0]["shape"][-1] == block["observation"]["size"]
+    assert block["onnx"]["outputs"][0]["shape"][-1] == len(block["robot"]["joint_names"])
+
+
+@pytest.mark.parametrize("gait", ["stand", "trot", "pace"])
+def test_shipped_entries_carry_the_current_deployment_block(gait: str) -> None:
+    folder = default_library_dir() / gait
+    meta = json.loads((folder / "metadata.json").read_text())
+    if "deployment" not in meta:
+        pytest.skip(f"library/{gait}/metadata.json has no deployment block yet")
+    assert meta["deployment"] == _block(gait, folder / "policy.onnx")
