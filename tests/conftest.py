@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import pytest
 
 from gaitlib.sim import make_backend
+from gaitlib.training import Library
+
+TINY_GAITS = ("stand", "trot")
+"""The gaits of :func:`tiny_library`."""
 
 BACKENDS = [
     "mujoco",
@@ -34,39 +41,44 @@ def make(backend_name: str):
 
 
 @pytest.fixture(scope="session")
-def switching_library(tmp_path_factory):
-    """A library of two tiny one-iteration policies (stand, trot) with a transition-net and a TMT fitted on a small
-    real collection: everything the strategies and the meta-controller load."""
-    import dataclasses
-
+def tiny_library(tmp_path_factory) -> Library:
+    """The tests' one trained library: stand and trot, one PPO iteration each with the tiny preset (real policies
+    on the real simulator, untrained in effect). Shared by every test module: copy it (:func:`copy_library`)
+    before writing into it."""
     from gaitlib.gaits import get_gait
-    from gaitlib.strategies import build_table, save_table
-    from gaitlib.training import get_preset, load_entry
+    from gaitlib.training import get_preset
     from gaitlib.training.trainer import TrainRequest, train_gait
-    from gaitlib.transition_net import FitConfig, fit, save_net
+
+    root = tmp_path_factory.mktemp("tiny")
+    for gait in TINY_GAITS:
+        train_gait(
+            TrainRequest(
+                description=get_gait(gait), preset=get_preset("tiny"), iterations=1, library=root / "library",
+                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
+            )
+        )
+    return Library(root / "library")
+
+
+def copy_library(library: Library, folder: Path) -> Library:
+    """A writable copy of ``library`` in ``folder``."""
+    shutil.copytree(library.root, folder)
+    return Library(folder)
+
+
+@pytest.fixture(scope="session")
+def switching_library(tiny_library, tmp_path_factory) -> Path:
+    """A copy of the tiny library with a transition-net and a TMT fitted (through :func:`fit_library`) on a small
+    real collection: everything the strategies and the meta-controller load."""
+    from gaitlib.strategies.fitting import fit_library
     from gaitlib.transitions import CollectConfig, collect, read
 
     root = tmp_path_factory.mktemp("switching")
-    library = root / "library"
-    tiny = dataclasses.replace(
-        get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
-        critic_hidden=(32, 16),
-    )
-    gaits = ["stand", "trot"]
-    for gait in gaits:
-        train_gait(
-            TrainRequest(
-                description=get_gait(gait), preset=tiny, iterations=1, library=library, run_dir=root / "runs" / gait,
-                backend="mujoco", eval_episodes=2, eval_seconds=0.5,
-            )
-        )
+    library = copy_library(tiny_library, root / "library")
     data_path = root / "samples.h5"
     config = CollectConfig(
         samples=32, num_worlds=8, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.5, push_max=400.0, backend="mujoco",
     )
-    collect(data_path, library=library, gaits=gaits, config=config)
-    data = read(data_path)
-    save_net(library / "transition_net" / "net.pt", fit(data, FitConfig(epochs=2)))
-    identities = {g: load_entry(library, g).identity for g in gaits}
-    save_table(library / "tmt" / "tmt.json", build_table(data, identities=identities, source=str(data_path)))
-    return library
+    collect(data_path, library=library, config=config)
+    fit_library(library, read(data_path), sources=[data_path], epochs=2)
+    return library.root

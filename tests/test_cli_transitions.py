@@ -2,38 +2,23 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import h5py
 import pytest
 from cli_runner import gaitlib
+from conftest import copy_library
 
 from gaitlib.cli.options import parse_pairs
-from gaitlib.gaits import get_gait
-from gaitlib.training import get_preset
-from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions import validate
 
-TINY = dataclasses.replace(
-    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
-    critic_hidden=(32, 16),
-)
 QUICK = ["--worlds", "4", "--horizon", "1.5", "--push-max", "400", "--backend", "mujoco"]
 
 
-
-@pytest.fixture(scope="module")
-def library(tmp_path_factory):
-    root = tmp_path_factory.mktemp("cli-transitions")
-    for gait in ("stand", "trot"):
-        train_gait(
-            TrainRequest(
-                description=get_gait(gait), preset=TINY, iterations=1, library=root / "library",
-                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
-            )
-        )
-    return root / "library"
+@pytest.fixture
+def library(tiny_library, tmp_path):
+    """A writable copy of the tests' tiny library (fit writes into it)."""
+    return copy_library(tiny_library, tmp_path / "library").root
 
 
 def test_pairs_accept_ordered_pairs_and_whole_gaits() -> None:
@@ -78,3 +63,19 @@ def test_foreign_hdf5_is_one_error_line(tmp_path) -> None:
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gaitlib: error:") and "foreign.h5" in lines[0]
+
+
+def test_gaits_named_in_any_order_are_stored_fitted_and_run_in_the_canonical_order(library, tmp_path) -> None:
+    """The defect of issue 11: ``--gaits trot,stand`` kept the user's order, the net was fitted for
+    ['trot', 'stand'], and ``gaitlib run`` refused it."""
+    data, lib = str(tmp_path / "order.h5"), str(library)
+    collected = gaitlib("collect", "--samples", "16", "--gaits", "trot,stand", "--out", data, "--library", lib, *QUICK)
+    assert collected.returncode == 0, collected.stderr
+    assert validate(data).header.gaits == ("stand", "trot")
+    assert gaitlib("fit", "--data", data, "--epochs", "2", "--library", lib).returncode == 0
+    ran = gaitlib(
+        "run", "--from", "trot", "--to", "stand", "--strategy", "net", "--seconds", "1", "--request-at", "0.3",
+        "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--library", lib, "--json",
+    )
+    assert ran.returncode == 0, ran.stderr
+    assert json.loads(ran.stdout)["strategy"] == "net" and (tmp_path / "run.png").is_file()

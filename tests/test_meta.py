@@ -15,7 +15,6 @@ from gaitlib.meta.episode import run_episode
 from gaitlib.sim import make_backend
 from gaitlib.strategies.net import NetStrategy
 from gaitlib.strategies.value import ValueStrategy
-from gaitlib.training import default_library_dir
 
 
 class Tagged(torch.nn.Module):
@@ -109,24 +108,38 @@ def test_value_strategies_see_the_destination_critic_on_every_candidate(setup) -
         sim.close()
 
 
+@pytest.fixture(scope="module")
+def shipped():
+    """The shipped library: trained policies, so a trot runs the whole request window without falling."""
+    return load_switching(None)
+
+
 @pytest.mark.parametrize("strategy", ["random", "value", "tmt", "tmt-value", "net"])
-def test_run_episode_records_the_switch(setup, strategy) -> None:
+def test_run_episode_records_the_switch(shipped, strategy) -> None:
+    request_s, deadline_s = 0.3, 0.5
     trace = run_episode(
-        setup, source="trot", dest="stand", strategy=strategy, request_s=0.3, seconds=1.2, deadline_s=0.5, seed=2
+        shipped, source="trot", dest="stand", strategy=strategy, request_s=request_s, seconds=1.2,
+        deadline_s=deadline_s, seed=2, backend="mujoco",
     )
-    steps = len(trace.time_s)
+    trot, stand = shipped.gait_index("trot"), shipped.gait_index("stand")
+    steps, event = len(trace.time_s), trace.switch
     assert trace.qpos.shape == (steps, 19) and trace.foot_contact.shape == (steps, 4)
-    if trace.switch is not None:
-        assert trace.switch_s >= 0.3 - 1e-9 and trace.switch.dest == setup.gait_index("stand")
-        assert trace.active[-1] == setup.gait_index("stand")
-    else:
-        assert trace.fell_s is not None and trace.fell_s <= 0.3 + 0.5 + trace.dt  # fell before the deadline
+    assert event is not None and (event.source, event.dest) == (trot, stand) and 0.0 <= event.phase < 1.0
+    assert request_s - 1e-9 <= trace.switch_s <= request_s + deadline_s + 1e-9
+    assert event.wait_s == pytest.approx(trace.switch_s - round(request_s / trace.dt) * trace.dt)
+    assert (trace.active[: event.step] == trot).all() and (trace.active[event.step :] == stand).all()
+    waiting = np.isfinite(trace.score)  # the best score is recorded exactly while the request waits
+    assert waiting.sum() == (0 if strategy == "random" else event.step - round(request_s / trace.dt) + 1)
+    if strategy == "random":
+        assert event.wait_s == 0.0 and math.isnan(event.score) and not event.forced
+    elif event.forced:
+        assert event.wait_s == pytest.approx(deadline_s, abs=trace.dt)
 
 
 def test_pushes_hit_only_inside_the_disturbance_window() -> None:
     request_s, deadline_s = 1.0, 0.5
     trace = run_episode(
-        load_switching(default_library_dir()),  # trained policies: the robot outlives the window
+        load_switching(None),  # trained policies: the robot outlives the window
         source="stand",
         dest="trot",
         strategy="net",

@@ -11,16 +11,9 @@ import pytest
 import torch
 
 from gaitlib.errors import TransitionDataError
-from gaitlib.gaits import get_gait
-from gaitlib.training import get_preset, load_entry
-from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions import CollectConfig, collect, explicit_state, read, read_all, schema, validate
 from gaitlib.transitions.schema import COLUMNS, TransitionBatch, TransitionHeader
 
-TINY = dataclasses.replace(
-    get_preset("cpu"), num_envs=4, steps_per_env=8, epochs=1, mini_batches=1, actor_hidden=(32, 16),
-    critic_hidden=(32, 16),
-)
 GAITS = ["stand", "trot"]
 # Short cycles keep the collections to a few seconds; with strong pushes (up to 400 N) the untrained policies fall
 # often enough for both labels.
@@ -31,17 +24,9 @@ QUICK = CollectConfig(
 
 
 @pytest.fixture(scope="module")
-def library(tmp_path_factory):
-    """A library of two tiny one-iteration policies."""
-    root = tmp_path_factory.mktemp("library")
-    for gait in GAITS:
-        train_gait(
-            TrainRequest(
-                description=get_gait(gait), preset=TINY, iterations=1, library=root / "library",
-                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
-            )
-        )
-    return root / "library"
+def library(tiny_library):
+    """The tests' tiny library (read only here)."""
+    return tiny_library
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +177,7 @@ def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -
     info = validate(path)
     assert info.count == result.samples == 24
     assert info.header.gaits == tuple(GAITS)
-    assert info.header.identities == tuple(load_entry(library, g).identity for g in GAITS)
+    assert info.header.identities == tuple(library.identities(GAITS).values())
     assert info.header.settings["horizon_s"] == QUICK.horizon_s and info.header.settings["backend"] == "mujoco"
     assert info.header.settings["push_max_n"] == QUICK.push_max
     s = read(path).samples

@@ -143,7 +143,7 @@ def run_sweep(
     out = Path(out)
     pairs = _pairs(cfg, setup)
     settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
-    identities = dict(setup.resources.identities)
+    identities = setup.resources.library.identities(setup.gaits)
     results = load_results(out)
     if results:
         if results["settings"] != settings or results["library_identities"] != identities:

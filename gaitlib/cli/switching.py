@@ -32,11 +32,10 @@ def run_command(
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
-    from gaitlib.training import default_library_dir
 
     if not 0.0 <= request_at < seconds:
         raise GaitlibError(f"--request-at must lie in [0, --seconds) = [0, {seconds:g})")
-    setup = load_switching(library or default_library_dir())
+    setup = load_switching(library)
     trace = run_episode(
         setup,
         source=source,
@@ -111,9 +110,8 @@ def benchmark_command(
     from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
-    from gaitlib.training import default_library_dir
 
-    setup = load_switching(library or default_library_dir())
+    setup = load_switching(library)
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work

@@ -59,10 +59,10 @@ def collect_throughput(
 ) -> None:
     """Samples per second of gaitlib collect against what the environment step allows (goal: ratio >= 0.8)."""
     from gaitlib.throughput.collect import measure_collect_throughput
-    from gaitlib.training import default_library_dir
+    from gaitlib.training import Library
 
     result = measure_collect_throughput(
-        library or default_library_dir(), worlds=worlds, seconds=seconds, push_max=push_max, backend=backend
+        Library(library), worlds=worlds, seconds=seconds, push_max=push_max, backend=backend
     )
     if as_json:
         print(json.dumps(result.as_dict()))

@@ -9,15 +9,6 @@ import typer
 
 __all__ = ["collect_command", "fit_command"]
 
-PAPER_PAIRS = ("stand-pace", "stand-trot", "pace-trot", "pace-stand", "trot-pace", "trot-stand")
-"""Column order of paper Table 3 (S-P, S-T, P-T, P-S, T-P, T-S)."""
-PAPER_TABLE_3 = {
-    "phase": (88.94, 87.59, 63.86, 67.42, 66.14, 65.01),
-    "explicit": (89.15, 87.5, 81.26, 78.01, 76.16, 71.85),
-    "latent": (87.14, 86.97, 82.45, 78.68, 78.3, 75.49),
-}
-"""Paper Table 3: balanced validation accuracy (%) per input kind, 5500 samples per pair."""
-
 
 def collect_command(
     samples: float = typer.Option(2e6, "--samples", help="Samples the file holds when done (2e6 is accepted)."),
@@ -39,12 +30,11 @@ def collect_command(
 
     from gaitlib.cli.options import parse_pairs
     from gaitlib.cli.progress import job_progress
-    from gaitlib.training import default_library_dir
-    from gaitlib.training.library import entry_names
+    from gaitlib.training import Library
     from gaitlib.transitions import CollectConfig, collect
 
-    library = library or default_library_dir()
-    names = [g.strip() for g in gaits.split(",")] if gaits else entry_names(library)
+    lib = Library(library)
+    names = lib.order(gaits.split(",") if gaits else None)
     config = CollectConfig(
         samples=int(samples),
         num_worlds=worlds,
@@ -66,7 +56,7 @@ def collect_command(
             if not console.is_terminal:
                 console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)
 
-        result = collect(out, library=library, gaits=names, config=config, progress=show)
+        result = collect(out, library=lib, gaits=names, config=config, progress=show)
     if result.note:
         console.print(result.note)
     console.print(
@@ -84,53 +74,25 @@ def fit_command(
     epochs: int = typer.Option(100, "--epochs", help="Training epochs."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     ablation: bool = typer.Option(False, "--ablation", help="Fit all three inputs and compare with the paper."),
-    evaluate: bool = typer.Option(False, "--evaluate", help="Score the shipped net on --data instead of fitting."),
+    evaluate: bool = typer.Option(False, "--evaluate", help="Score the library's net on --data instead of fitting."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library."""
-    from gaitlib.atomic import write_json
-    from gaitlib.strategies import build_table, save_table
-    from gaitlib.training import default_library_dir, load_entry
-    from gaitlib.transition_net import INPUT_KINDS, FitConfig, evaluate_net, fit, load_net, save_net
+    from gaitlib.strategies.fitting import evaluate_library, fit_library
+    from gaitlib.training import Library
+    from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 
-    library = library or default_library_dir()
-    net_path = library / "transition_net" / "net.pt"
-    if input_kind not in INPUT_KINDS:
-        from gaitlib.errors import UnknownNameError
-
-        raise UnknownNameError("input", input_kind, list(INPUT_KINDS))
+    lib = Library(library)
     samples = read_all(data)
-    sources = ", ".join(str(p) for p in data)
     if evaluate:
-        gaits = samples.header.gaits
-        saved = load_net(net_path, identities={g: load_entry(library, g).identity for g in gaits})
-        accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, samples).items()}
-        _report({"input": saved.metadata["input"], "data": sources, "accuracy": accuracy}, as_json)
+        _report(evaluate_library(lib, samples, sources=data), as_json)
         return
-    kinds = list(INPUT_KINDS) if ablation else [input_kind]
-    results = {kind: fit(samples, FitConfig(kind=kind, epochs=epochs, seed=seed)) for kind in kinds}
-    shipped = results.get("latent", results[kinds[0]])
-    save_net(net_path, shipped)
-    identities = dict(zip(samples.header.gaits, samples.header.identities, strict=True))
-    tmt_path = save_table(library / "tmt" / "tmt.json", build_table(samples, identities=identities, source=sources))
-    table = {
-        kind: {f"{m}-{n}": a for (m, n), a in result.validation_accuracy.items()} for kind, result in results.items()
-    }
-    report = {
-        "data": sources,
-        "samples": len(samples.samples),
-        "balanced_samples": {
-            kind: sum(2 * (t + v) for t, v in result.split.per_class.values()) for kind, result in results.items()
-        },
-        "balanced_validation_accuracy": table,
-        "paper_table_3": {kind: dict(zip(PAPER_PAIRS, row, strict=True)) for kind, row in PAPER_TABLE_3.items()},
-        "written": [str(net_path), str(tmt_path)],
-    }
-    write_json(net_path.with_name("accuracy.json"), report)
-    _report(report, as_json)
+    inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
+    report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed)
+    _report(report.as_dict(), as_json)
 
 
 def _report(report: dict, as_json: bool) -> None:
@@ -141,7 +103,9 @@ def _report(report: dict, as_json: bool) -> None:
 
     from gaitlib.cli.tables import table_console
 
-    rows = report.get("balanced_validation_accuracy") or {"shipped net": report["accuracy"]}
+    from gaitlib.strategies.fitting import PAPER_PAIRS, PAPER_TABLE_3
+
+    rows = report.get("balanced_validation_accuracy") or {"library net": report["accuracy"]}
     pairs = [p for p in PAPER_PAIRS if any(p in r for r in rows.values())]
     pairs += sorted({p for r in rows.values() for p in r} - set(pairs))
     table = Table(title="balanced accuracy (%) per ordered pair (paper Table 3 layout)")
@@ -152,5 +116,5 @@ def _report(report: dict, as_json: bool) -> None:
         table.add_row(kind, *(f"{100 * accuracy[p]:.2f}" if p in accuracy else "-" for p in pairs))
         if kind in PAPER_TABLE_3:
             paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
-            table.add_row(f"  paper {kind}", *(f"{paper[p]:.2f}" if p in paper else "-" for p in pairs))
+            table.add_row(f"  paper {kind}", *(f"{100 * paper[p]:.2f}" if p in paper else "-" for p in pairs))
     table_console().print(table)

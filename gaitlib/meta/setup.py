@@ -1,4 +1,5 @@
-"""Everything a meta-controller needs from a library, loaded once: policies, reference clips, strategies."""
+"""Everything a meta-controller needs from a library, loaded once: policies, reference clips, strategies
+(:class:`SwitchingSetup`)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from gaitlib.errors import GaitlibError, UnknownNameError
 from gaitlib.meta.controller import DEADLINE_S, MetaController
 from gaitlib.sim import SimBackend
 from gaitlib.strategies import SwitchResources, get_strategy
-from gaitlib.training.library import LibraryEntry, entry_names, load_entry
+from gaitlib.training.library import Library, LibraryEntry
 
 __all__ = ["SwitchingSetup", "load_switching"]
 
@@ -39,10 +40,8 @@ class SwitchingSetup:
 
     def make_env(self, sim: SimBackend, cfg: EnvConfig | None = None, *, seed: int = 0) -> ImitationEnv:
         """An environment of every gait on ``sim``, with the policies' action settings (``cfg`` for the rest)."""
-        first = self.entries[0]
-        cfg = dataclasses.replace(
-            cfg or EnvConfig(), action_scale=first.action_scale, action_clip=float(first.metadata["action"]["clip"])
-        )
+        _, action = self.resources.library.shared_policy_settings(self.gaits)
+        cfg = dataclasses.replace(cfg or EnvConfig(), action_scale=action["scale"], action_clip=action["clip"])
         return ImitationEnv(sim, [e.clip for e in self.entries], cfg, seed=seed)
 
     def controller(
@@ -58,15 +57,12 @@ class SwitchingSetup:
         return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s)
 
 
-def load_switching(library: Path) -> SwitchingSetup:
-    """Load every entry of ``library`` (gaits in name order, as collections store them) for switching."""
-    library = Path(library)
-    names = entry_names(library)
+def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
+    """Load every entry of ``library`` (a :class:`Library`, a folder, or ``None`` for the default library) for
+    switching, gaits in the canonical order the transition data, TMT and net use."""
+    lib = library if isinstance(library, Library) else Library(library)
+    names = lib.gaits()
     if len(names) < 2:
-        raise GaitlibError(f"library {library} holds {len(names)} gait(s); switching needs at least two")
-    entries = [load_entry(library, name) for name in names]
-    scales = {(e.action_scale, float(e.metadata["action"]["clip"])) for e in entries}
-    if len(scales) != 1:
-        raise GaitlibError(f"library {library} mixes action scales/clips {sorted(scales)}; retrain its gaits alike")
-    resources = SwitchResources(library=library, identities={e.name: e.identity for e in entries}, gaits=tuple(names))
-    return SwitchingSetup(entries, resources)
+        raise GaitlibError(f"library {lib.root} holds {len(names)} gait(s); switching needs at least two")
+    lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed action settings now
+    return SwitchingSetup(lib.entries(names), SwitchResources(library=lib, gaits=names))

@@ -1,22 +1,23 @@
 """Switching strategies behind one interface (:class:`Strategy`), a small registry, and what they are built from.
 
-Built-in: ``random``, ``value``, ``tmt``, ``tmt-value`` and ``net`` (design brief section 7). A strategy factory
-takes the :class:`SwitchResources` of a library (its TMT and transition-net, loaded only when a strategy asks);
-:func:`register_strategy` adds one.
+Built-in: ``random``, ``value``, ``tmt``, ``tmt-value`` (the baselines of the paper's Fig. 4) and ``net`` (the
+paper's transition-net rule). A strategy factory takes the :class:`SwitchResources` of a library (its TMT and
+transition-net, loaded only when a strategy asks); :func:`register_strategy` adds one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from gaitlib.errors import TransitionDataError, UnknownNameError
+from gaitlib.errors import TransitionDataError
+from gaitlib.registry import Registry
 from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
 from gaitlib.strategies.net import NET_THRESHOLD, NetStrategy
 from gaitlib.strategies.random_switch import RandomStrategy
 from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, TransitionTable, build_table, load_table, save_table
 from gaitlib.strategies.value import ValueStrategy
+from gaitlib.training.library import Library
 
 __all__ = [
     "NET_THRESHOLD",
@@ -38,14 +39,13 @@ __all__ = [
 
 @dataclass
 class SwitchResources:
-    """Where strategies get their data: a library folder and its gaits, with the TMT and net loaded on demand."""
+    """Where strategies get their data: a library and the gaits in use, with its TMT and transition-net loaded on
+    demand and checked against the library's policies."""
 
-    library: Path
-    """Library folder (holds ``transition_net/net.pt`` and ``tmt/tmt.json``)."""
-    identities: dict[str, str]
-    """Gait name -> library identity of the policies in use."""
+    library: Library
+    """The library (its TMT and transition-net, and the identities of its policies)."""
     gaits: tuple[str, ...]
-    """Gait order of the environment the strategies will serve (indices in queries follow it)."""
+    """Gaits of the environment the strategies will serve, in canonical order (indices in queries follow it)."""
     seed: int = 0
     """Seed of random choices."""
     _cache: dict = field(default_factory=dict, repr=False)
@@ -54,7 +54,7 @@ class SwitchResources:
     def table(self) -> TransitionTable:
         """The library's TMT (with typical values and calibrated thresholds)."""
         if "table" not in self._cache:
-            table = load_table(self.library / "tmt" / "tmt.json", identities=self.identities)
+            table = load_table(self.library.tmt_path, identities=self.library.identities(self.gaits))
             self._check_gaits("TMT", table.gaits)
             self._cache["table"] = table
         return self._cache["table"]
@@ -65,7 +65,7 @@ class SwitchResources:
         if "net" not in self._cache:
             from gaitlib.transition_net import load_net
 
-            saved = load_net(self.library / "transition_net" / "net.pt", identities=self.identities)
+            saved = load_net(self.library.net_path, identities=self.library.identities(self.gaits))
             self._check_gaits("transition-net", saved.net.spec.gaits)
             self._cache["net"] = saved.net
         return self._cache["net"]
@@ -78,27 +78,27 @@ class SwitchResources:
 
 
 StrategyFactory = Callable[[SwitchResources], Strategy]
-_REGISTRY: dict[str, StrategyFactory] = {
-    "random": lambda r: RandomStrategy(seed=r.seed),
-    "value": lambda r: ValueStrategy(threshold=r.table.thresholds["value"]),
-    "tmt": lambda r: TMTStrategy(r.table),
-    "tmt-value": lambda r: TMTValueStrategy(r.table),
-    "net": lambda r: NetStrategy(r.net),
-}
+"""``factory(resources) -> Strategy``."""
+
+_STRATEGIES: Registry[StrategyFactory] = Registry("strategy")
+"""The strategies by name; :func:`register_strategy` adds one."""
+_STRATEGIES.register("random", lambda r: RandomStrategy(seed=r.seed))
+_STRATEGIES.register("value", lambda r: ValueStrategy(threshold=r.table.thresholds["value"]))
+_STRATEGIES.register("tmt", lambda r: TMTStrategy(r.table))
+_STRATEGIES.register("tmt-value", lambda r: TMTValueStrategy(r.table))
+_STRATEGIES.register("net", lambda r: NetStrategy(r.net))
 
 
 def register_strategy(name: str, factory: StrategyFactory) -> None:
     """Add (or replace) the strategy ``name``, built by ``factory(resources)``."""
-    _REGISTRY[name] = factory
+    _STRATEGIES.register(name, factory)
 
 
 def strategy_names() -> list[str]:
     """Registered strategy names, in registration order."""
-    return list(_REGISTRY)
+    return _STRATEGIES.names()
 
 
 def get_strategy(name: str, resources: SwitchResources) -> Strategy:
     """Build strategy ``name`` from ``resources``; :class:`UnknownNameError` for an unknown name."""
-    if name not in _REGISTRY:
-        raise UnknownNameError("strategy", name, strategy_names())
-    return _REGISTRY[name](resources)
+    return _STRATEGIES.get(name)(resources)

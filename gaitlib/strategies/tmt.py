@@ -25,6 +25,7 @@ import torch
 from gaitlib.atomic import write_json
 from gaitlib.errors import TransitionDataError
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
+from gaitlib.training.library import check_identities
 from gaitlib.transitions.schema import TransitionData
 
 __all__ = [
@@ -183,11 +184,7 @@ def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:
         raise TransitionDataError(
             f"TMT {path} has format version {payload.get('format_version')}; this gaitlib reads {FORMAT_VERSION}"
         )
-    for gait, identity in payload["library_identities"].items():
-        if identities.get(gait) != identity:
-            raise TransitionDataError(
-                f"TMT {path} was built for another '{gait}' policy than the library's; collect and fit again"
-            )
+    check_identities(payload["library_identities"], identities, what=f"TMT {path}")
     gaits = tuple(payload["gaits"])
     index = {name: i for i, name in enumerate(gaits)}
 

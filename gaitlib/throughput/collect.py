@@ -21,6 +21,7 @@ from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
+from gaitlib.training import Library
 from gaitlib.transitions import CollectConfig, collect
 
 __all__ = ["CollectThroughput", "measure_collect_throughput"]
@@ -51,7 +52,7 @@ class CollectThroughput:
 
 
 def measure_collect_throughput(
-    library: Path, *, worlds: int, seconds: float, push_max: float, backend: str = "mujoco"
+    library: Library, *, worlds: int, seconds: float, push_max: float, backend: str = "mujoco"
 ) -> CollectThroughput:
     """Time the reference rollout, a collection, and the reference again, ``seconds`` each."""
     setup = load_switching(library)
@@ -65,7 +66,7 @@ def measure_collect_throughput(
             batch_size=worlds,
             time_limit_s=seconds,
         )
-        result = collect(Path(scratch) / "bench.h5", library=library, gaits=list(setup.gaits), config=config)
+        result = collect(Path(scratch) / "throughput.h5", library=library, config=config)
     reference.append(_rollout_steps_per_s(setup, worlds, seconds, push_max, backend))
     env_rate = sum(reference) / len(reference)
     allowed = env_rate / result.steps_per_sample

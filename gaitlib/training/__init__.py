@@ -1,13 +1,23 @@
-"""Training gait policies with rsl-rl PPO, the library entries they are saved as, and their evaluation."""
+"""Training gait policies with rsl-rl PPO, the library they are saved in, and their evaluation."""
 
-from gaitlib.training.library import LibraryEntry, LibraryError, default_library_dir, load_entry, save_entry
+from gaitlib.training.library import (
+    Library,
+    LibraryEntry,
+    LibraryError,
+    default_library_dir,
+    gait_order,
+    load_entry,
+    save_entry,
+)
 from gaitlib.training.presets import TrainPreset, get_preset, preset_names
 
 __all__ = [
+    "Library",
     "LibraryEntry",
     "LibraryError",
     "TrainPreset",
     "default_library_dir",
+    "gait_order",
     "get_preset",
     "load_entry",
     "preset_names",

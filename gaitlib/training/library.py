@@ -1,4 +1,15 @@
-"""The policy library on disk: one folder per gait, written atomically, checked when read.
+"""The library on disk, behind one object (:class:`Library`) that alone knows its layout.
+
+A library folder holds one entry per gait and the switching models fitted on its transition data::
+
+    <library>/<gait>/metadata.json, policy.pt, policy.onnx   one trained gait (see below)
+    <library>/transition_net/net.pt                          the transition-net (gaitlib fit)
+    <library>/transition_net/accuracy.json                   how well it and its input ablation did
+    <library>/tmt/tmt.json                                   the TMT with the strategies' calibrated thresholds
+
+Gaits are always in one canonical order, their names sorted (:func:`gait_order`): transition files, the
+transition-net's one-hot gait inputs and the TMT's tables index gaits in that order whatever order a user named
+them in. Folders whose name starts with ``.`` (temporary or replaced entries) are never gaits.
 
 ``<library>/<gait>/`` holds ``policy.pt`` (actor and critic weights with their observation normalizers),
 ``policy.onnx`` (the deterministic actor, normalizer included) and ``metadata.json`` (format version, the gait
@@ -14,13 +25,14 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
 from gaitlib.envs import observations as obs_fn
-from gaitlib.errors import GaitlibError
+from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.robots import get_robot
 from gaitlib.training.export import export_onnx
@@ -28,12 +40,12 @@ from gaitlib.training.policy import GaitPolicy, build_models
 
 __all__ = [
     "FORMAT_VERSION",
+    "Library",
     "LibraryEntry",
     "LibraryError",
+    "check_identities",
     "default_library_dir",
-    "entry_names",
-    "load_entry",
-    "save_entry",
+    "gait_order",
 ]
 
 FORMAT_VERSION = 1
@@ -65,9 +77,19 @@ class LibraryEntry:
         return self.metadata["sha256"]
 
     @property
+    def action(self) -> dict:
+        """Action settings: ``type``, ``scale`` and ``clip`` (metadata ``action``)."""
+        return self.metadata["action"]
+
+    @property
     def action_scale(self) -> float:
         """PD target = reference + action_scale * action, rad per action unit."""
-        return float(self.metadata["action"]["scale"])
+        return float(self.action["scale"])
+
+    @property
+    def action_clip(self) -> float:
+        """Actions are clipped to [-action_clip, action_clip] action units before use."""
+        return float(self.action["clip"])
 
 
 def default_library_dir() -> Path:
@@ -77,14 +99,146 @@ def default_library_dir() -> Path:
     return Path(__file__).resolve().parents[2] / "library"
 
 
-def entry_names(library: Path) -> list[str]:
-    """Gaits that have an entry in ``library``."""
-    if not library.is_dir():
-        return []
-    return sorted(p.name for p in library.iterdir() if (p / "metadata.json").is_file())
+def gait_order(names: Iterable[str]) -> tuple[str, ...]:
+    """The canonical order of a set of gaits (names sorted, each once): the one order every file indexes gaits by."""
+    return tuple(sorted(set(names)))
 
 
-def save_entry(
+def check_identities(recorded: Mapping[str, str], current: Mapping[str, str], *, what: str) -> None:
+    """Refuse, with one line naming ``what``, a file (transition data, a transition-net, a TMT) made for other
+    policies than the current ones: ``recorded`` is gait name -> identity as the file holds them, ``current`` the
+    library's. Every recorded gait must be present with the same identity
+    (:class:`~gaitlib.errors.TransitionDataError` otherwise)."""
+    for gait, identity in recorded.items():
+        if gait not in current:
+            raise TransitionDataError(f"{what} needs gait '{gait}', which the library does not hold")
+        if current[gait] != identity:
+            raise TransitionDataError(
+                f"{what} was made for another '{gait}' policy than the library's (identities differ); "
+                "collect and fit again"
+            )
+
+
+class Library:
+    """A library folder: its gait entries (loaded once each), their identities and shared action settings, and where
+    its transition-net, accuracy report and TMT live.
+
+    ``root``: the folder (``None``: :func:`default_library_dir`). Nothing is read until asked for.
+    """
+
+    NET = "transition_net/net.pt"
+    """The transition-net, relative to the root."""
+    ACCURACY = "transition_net/accuracy.json"
+    """The fit's accuracy report (Table 3 layout), relative to the root."""
+    TMT = "tmt/tmt.json"
+    """The TMT and calibrated thresholds, relative to the root."""
+
+    def __init__(self, root: Path | str | None = None) -> None:
+        self.root = Path(root) if root is not None else default_library_dir()
+        """The library folder."""
+        self._entries: dict[str, LibraryEntry] = {}
+
+    def __repr__(self) -> str:
+        return f"Library({str(self.root)!r})"
+
+    @property
+    def net_path(self) -> Path:
+        return self.root / self.NET
+
+    @property
+    def accuracy_path(self) -> Path:
+        return self.root / self.ACCURACY
+
+    @property
+    def tmt_path(self) -> Path:
+        return self.root / self.TMT
+
+    def relative(self, path: Path) -> str:
+        """``path`` relative to the root where it lies inside the library, else as given (for records)."""
+        try:
+            return Path(path).resolve().relative_to(self.root.resolve()).as_posix()
+        except ValueError:
+            return str(path)
+
+    def gaits(self) -> tuple[str, ...]:
+        """Gaits that have an entry, in canonical order."""
+        if not self.root.is_dir():
+            return ()
+        return gait_order(
+            p.name for p in self.root.iterdir() if not p.name.startswith(".") and (p / "metadata.json").is_file()
+        )
+
+    def order(self, names: Iterable[str] | None = None) -> tuple[str, ...]:
+        """``names`` (``None``: every entry) checked to be entries of this library, in canonical order;
+        :class:`LibraryError` names the first that is not."""
+        if names is None:
+            return self.gaits()
+        names = [str(n).strip() for n in names]
+        known = self.gaits()
+        for name in names:
+            if name not in known:
+                raise LibraryError(
+                    f"no library entry for gait '{name}' in {self.root} (entries: {', '.join(known) or 'none'})"
+                )
+        return gait_order(names)
+
+    def entry(self, name: str) -> LibraryEntry:
+        """The loaded entry of gait ``name`` (loaded and checked on first use); :class:`LibraryError` if it is
+        missing or damaged."""
+        if name not in self._entries:
+            self._entries[name] = _load_entry(self.root, name, known=self.gaits())
+        return self._entries[name]
+
+    def entries(self, names: Iterable[str] | None = None) -> list[LibraryEntry]:
+        """The entries of ``names`` (``None``: all), in canonical order."""
+        return [self.entry(name) for name in self.order(names)]
+
+    def identities(self, names: Iterable[str] | None = None) -> dict[str, str]:
+        """Gait name -> identity (SHA-256 of the weights) of ``names`` (``None``: all), in canonical order."""
+        return {e.name: e.identity for e in self.entries(names)}
+
+    def check_identities(self, recorded: Mapping[str, str], *, what: str) -> None:
+        """Refuse a file made for other policies than this library's (see :func:`check_identities`)."""
+        present = [g for g in recorded if g in self.gaits()]
+        check_identities(recorded, self.identities(present), what=what)
+
+    def shared_policy_settings(self, names: Iterable[str] | None = None) -> tuple[int, dict]:
+        """The latent size and action settings (``type``, ``scale``, ``clip``) that the entries of ``names`` share:
+        policies that drive one environment and fill one transition file must agree on them."""
+        entries = self.entries(names)
+        latent = {e.name: e.policy.latent_dim for e in entries}
+        if len(set(latent.values())) != 1:
+            raise LibraryError(f"library policies have different latent sizes {latent}; retrain them alike")
+        actions = {e.name: (e.action["type"], e.action_scale, e.action_clip) for e in entries}
+        if len(set(actions.values())) != 1:
+            raise LibraryError(f"library policies use different action settings {actions}; retrain them alike")
+        kind, scale, clip = next(iter(actions.values()))
+        return next(iter(latent.values())), {"type": kind, "scale": scale, "clip": clip}
+
+    def save_entry(
+        self,
+        *,
+        description: GaitDescription,
+        actor: torch.nn.Module,
+        critic: torch.nn.Module,
+        networks: dict,
+        action: dict,
+        training: dict,
+        evaluation: dict,
+    ) -> Path:
+        """Write ``<root>/<gait>/`` atomically (into a temporary folder, then renamed over the old entry).
+
+        ``networks``: ``actor_hidden``, ``critic_hidden``, ``activation``; ``action``: ``type``, ``scale``, ``clip``;
+        ``training`` and ``evaluation``: free-form records of how the policy was made and how good it is.
+        """
+        self._entries.pop(description.name, None)
+        return _save_entry(
+            self.root, description=description, actor=actor, critic=critic, networks=networks, action=action,
+            training=training, evaluation=evaluation,
+        )
+
+
+def _save_entry(
     library: Path,
     *,
     description: GaitDescription,
@@ -95,11 +249,6 @@ def save_entry(
     training: dict,
     evaluation: dict,
 ) -> Path:
-    """Write ``library/<gait>/`` atomically (into a temporary folder, then renamed over the old entry).
-
-    ``networks``: ``actor_hidden``, ``critic_hidden``, ``activation``; ``action``: ``type``, ``scale``, ``clip``;
-    ``training`` and ``evaluation``: free-form records of how the policy was made and how good it is.
-    """
     library.mkdir(parents=True, exist_ok=True)
     final = library / description.name
     staging = Path(tempfile.mkdtemp(prefix=f".{description.name}.", dir=library))
@@ -129,13 +278,12 @@ def save_entry(
     return final
 
 
-def load_entry(library: Path, name: str) -> LibraryEntry:
+def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryEntry:
     """Load and check ``library/<name>/``; raises :class:`LibraryError` with a one-line reason."""
     folder = library / name
     meta_path = folder / "metadata.json"
-    if not meta_path.is_file():
-        known = ", ".join(entry_names(library)) or "none"
-        raise LibraryError(f"no library entry for gait '{name}' in {library} (entries: {known})")
+    if name not in known:
+        raise LibraryError(f"no library entry for gait '{name}' in {library} (entries: {', '.join(known) or 'none'})")
     try:
         metadata = json.loads(meta_path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as error:
@@ -198,3 +346,16 @@ def _versions() -> dict[str, str]:
         "rsl-rl-lib": version("rsl-rl-lib"),
         "mujoco": version("mujoco"),
     }
+
+
+# Transitional aliases while the trainer and its tests move to Library (removed before this change lands).
+def save_entry(library: Path, **fields) -> Path:
+    return Library(library).save_entry(**fields)
+
+
+def load_entry(library: Path, name: str) -> LibraryEntry:
+    return Library(library).entry(name)
+
+
+def entry_names(library: Path) -> list[str]:
+    return list(Library(library).gaits())

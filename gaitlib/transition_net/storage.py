@@ -20,6 +20,7 @@ import torch
 
 from gaitlib.atomic import atomic_path
 from gaitlib.errors import TransitionDataError
+from gaitlib.training.library import check_identities
 from gaitlib.transition_net.features import FeatureSpec
 from gaitlib.transition_net.fit import FitResult
 from gaitlib.transition_net.model import TransitionNet
@@ -94,14 +95,7 @@ def load_net(path: Path, *, identities: Mapping[str, str]) -> SavedNet:
     path = Path(path)
     saved = _read(path)
     metadata = saved["metadata"]
-    for gait, identity in metadata["library_identities"].items():
-        if gait not in identities:
-            raise TransitionDataError(f"transition-net {path} needs gait '{gait}', which the library does not hold")
-        if identities[gait] != identity:
-            raise TransitionDataError(
-                f"transition-net {path} was fitted for another '{gait}' policy than the library's "
-                "(library identities differ); collect and fit again"
-            )
+    check_identities(metadata["library_identities"], identities, what=f"transition-net {path}")
     try:
         spec = FeatureSpec(kind=metadata["input"], gaits=tuple(metadata["gaits"]), latent_dim=metadata["latent_dim"])
         network = metadata["network"]
