@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,25 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
         raise fail(f"cannot read motion file: {error}") from error
+    loop, duration, table, displacement = _parse(data, fail)
+    clip = ReferenceClip.from_frames(
+        name=path.stem,
+        frame_duration=duration,
+        loop=loop,
+        root_pos=table[:, :3],
+        root_quat=table[:, [6, 3, 4, 5]],  # stored x, y, z, w
+        joint_pos=table[:, 7:],
+        contact=np.zeros((len(table), 4), dtype=bool),
+        cycle_displacement=displacement,
+    )
+    heights = clip.foot_pos_world[..., 2]
+    return dataclasses.replace(clip, contact=heights <= heights.min() + contact_tolerance)
+
+
+
+def _parse(data: object, fail: Callable[[str], GaitError]) -> tuple[bool, float, np.ndarray, np.ndarray]:
+    """Check a motion file's JSON; return whether it loops, its frame duration (s), its (K, 19) frame table and its
+    per-cycle trunk displacement (3,), m."""
     if not isinstance(data, dict):
         raise fail("a motion file must hold a JSON object with LoopMode, FrameDuration and Frames")
     missing = [key for key in ("LoopMode", "FrameDuration", "Frames") if key not in data]
@@ -78,27 +98,14 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
         ):
             raise fail(f"frame {index} must be {_FRAME_SIZE} finite numbers (root xyz, quaternion xyzw, 12 joints)")
     table = np.asarray(frames, dtype=np.float64)
-    quat_xyzw = table[:, 3:7]
-    if (np.linalg.norm(quat_xyzw, axis=1) < 1e-6).any():
+    if (np.linalg.norm(table[:, 3:7], axis=1) < 1e-6).any():
         raise fail("a frame has a zero root quaternion")
     offset = data.get("EnableCycleOffsetPosition", False)
     if not isinstance(offset, bool):
         raise fail(f"EnableCycleOffsetPosition must be true or false, got {offset!r}")
     displacement = table[-1, :3] - table[0, :3] if offset else np.zeros(3)
     displacement[2] = 0.0
-
-    clip = ReferenceClip.from_frames(
-        name=path.stem,
-        frame_duration=float(duration),
-        loop=loop,
-        root_pos=table[:, :3],
-        root_quat=quat_xyzw[:, [3, 0, 1, 2]],
-        joint_pos=table[:, 7:],
-        contact=np.zeros((len(table), 4), dtype=bool),
-        cycle_displacement=displacement,
-    )
-    heights = clip.foot_pos_world[..., 2]
-    return dataclasses.replace(clip, contact=heights <= heights.min() + contact_tolerance)
+    return loop, float(duration), table, displacement
 
 
 def save_motion_file(clip: ReferenceClip, path: str | Path) -> None:

@@ -91,15 +91,12 @@ def run_episode(
         world = torch.zeros(1, dtype=torch.long, device=env.device)
         env.reset_worlds(world, gait=torch.tensor([m], device=env.device))
         env.enable_pushes(world, False)
-        threshold = ctl.strategy.threshold
-        if isinstance(threshold, dict):
-            threshold = threshold.get((m, n))
         trace = RunTrace(
             gaits=setup.gaits,
             source=source,
             dest=dest,
             strategy=strategy,
-            threshold=None if strategy == "random" else threshold,
+            threshold=None if strategy == "random" else _pair_threshold(ctl.strategy.threshold, (m, n)),
             dt=env.dt,
             request_s=request_s,
             push_n=push_n,
@@ -127,6 +124,11 @@ def run_episode(
         return trace
     finally:
         sim.close()
+
+
+def _pair_threshold(threshold: float | dict | None, pair: tuple[int, int]) -> float | None:
+    """A strategy's threshold for ``pair`` (source, dest): its own one, or its single one."""
+    return threshold.get(pair) if isinstance(threshold, dict) else threshold
 
 
 _ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "qpos")

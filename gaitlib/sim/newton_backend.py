@@ -29,7 +29,6 @@ overflow, divergence) and :meth:`NewtonBackend.reset` and the ``set_*`` commands
 from __future__ import annotations
 
 import contextlib
-from typing import TYPE_CHECKING
 
 import mujoco_warp
 import newton
@@ -39,11 +38,10 @@ from newton.solvers import SolverMuJoCo
 
 from gaitlib.errors import SimulationError
 from gaitlib.robots import RobotSpec
+from gaitlib.rotations import quat_rotate
 from gaitlib.sim.contract import KinematicState, SimBackend, SimState, standing_state
 from gaitlib.sim.mujoco_backend import load_model
-
-if TYPE_CHECKING:
-    import mujoco
+from gaitlib.sim.newton_model import NewtonConstruction, ground_contacts_kernel, resolve_device
 
 __all__ = ["NewtonBackend"]
 
@@ -58,47 +56,8 @@ _CAPACITY_BITS = (
 ) | int(SolverMuJoCo.OverflowBits.SOLVER_NCONMAX | SolverMuJoCo.OverflowBits.CONTACT_PIPELINE)
 """Overflow bits that mean lost contacts or constraints (solver iteration limits are not errors)."""
 
-_ROLE_OTHER = wp.constant(-1)
-"""Contact role of a geom that is neither the floor nor part of the robot."""
-_ROLE_FLOOR = wp.constant(-2)
-"""Contact role of the floor geom (feet are 0..F-1, other robot geoms F)."""
 
-
-@wp.kernel
-def _ground_contacts_kernel(
-    nacon: wp.array[int],
-    contact_world: wp.array[int],
-    contact_geom: wp.array[wp.vec2i],
-    contact_type: wp.array[int],
-    geom_role: wp.array[wp.int32],
-    num_feet: int,
-    foot_contact: wp.array2d[wp.int32],
-    body_contact: wp.array[wp.int32],
-):
-    """Flag floor contacts per world: role k < num_feet is foot k, role num_feet any other robot geom."""
-    i = wp.tid()
-    if i >= nacon[0]:
-        return
-    if (contact_type[i] & 1) == 0:  # not a constraint contact
-        return
-    g = contact_geom[i]
-    if g[0] < 0 or g[1] < 0:
-        return
-    role0 = geom_role[g[0]]
-    role1 = geom_role[g[1]]
-    other = int(_ROLE_OTHER)
-    if role0 == _ROLE_FLOOR:
-        other = role1
-    elif role1 == _ROLE_FLOOR:
-        other = role0
-    world = contact_world[i]
-    if other >= 0 and other < num_feet:
-        foot_contact[world, other] = 1
-    elif other == num_feet:
-        body_contact[world] = 1
-
-
-class NewtonBackend(SimBackend):
+class NewtonBackend(NewtonConstruction, SimBackend):
     """N robot worlds in one Newton model, stepped by ``SolverMuJoCo`` (mujoco_warp) on a CUDA GPU or the CPU.
 
     ``contacts_per_world`` sizes mujoco_warp's contact buffer (``nconmax``, contacts per world) and, with it, the
@@ -122,174 +81,13 @@ class NewtonBackend(SimBackend):
             raise SimulationError(f"contacts_per_world must be positive, got {contacts_per_world}")
         self.robot = robot
         self.num_worlds = num_worlds
-        self.device, self._wp_device = _resolve_device(device)
+        self.device, self._wp_device = resolve_device(device)
         self._contacts_per_world = contacts_per_world
         mj = load_model(robot)  # the MJCF as MuJoCo C compiles it: checks it and gives the solver options
         self._dt = float(mj.opt.timestep)
         with wp.ScopedDevice(self._wp_device):
             self._build(robot, mj)
         self.reset(torch.arange(num_worlds, device=self.device), standing_state(robot, num_worlds, device=self.device))
-
-    # ----------------------------------------------------------------------------------------- construction
-    def _build(self, robot: RobotSpec, mj: mujoco.MjModel) -> None:
-        template = newton.ModelBuilder()
-        template.rigid_gap = 0.0  # MuJoCo's default geom gap; Newton's own default (0.1 m) is not in the MJCF
-        SolverMuJoCo.register_custom_attributes(template)
-        try:
-            template.add_mjcf(str(robot.mjcf_path))
-        except (ValueError, KeyError) as error:
-            raise SimulationError(f"Newton cannot import {robot.mjcf_path}: {error}") from error
-
-        joints = [_find(template.joint_label, name, "joint") for name in robot.joint_names]
-        for j in joints:
-            dof = template.joint_qd_start[j]
-            if template.joint_target_mode[dof] != int(newton.JointTargetMode.POSITION):
-                raise SimulationError(f"joint '{template.joint_label[j]}' has no <position> actuator")
-            template.joint_target_ke[dof] = robot.kp_default
-            template.joint_target_kd[dof] = robot.kd_default
-            template.joint_effort_limit[dof] = robot.torque_limit
-        trunk = _find(template.body_label, robot.trunk_body, "body")
-        root = [j for j, child in enumerate(template.joint_child) if child == trunk]
-        if len(root) != 1 or template.joint_type[root[0]] != newton.JointType.FREE:
-            raise SimulationError(f"body '{robot.trunk_body}' must hang from a free joint")
-        site = int(newton.ShapeFlags.SITE)
-        geoms = [s for s, flags in enumerate(template.shape_flags) if not flags & site]
-        sites = [s for s, flags in enumerate(template.shape_flags) if flags & site]
-        floor = _find(template.shape_label, "floor", "geom", among=geoms)
-        foot_geoms = [_find(template.shape_label, f, "geom", among=geoms) for f in robot.foot_names]
-        foot_sites = [_find(template.shape_label, f, "site", among=sites) for f in robot.foot_names]
-
-        builder = newton.ModelBuilder()
-        SolverMuJoCo.register_custom_attributes(builder)
-        builder.replicate(template, self.num_worlds)
-        model = builder.finalize()
-        if model.articulation_count != self.num_worlds:
-            raise SimulationError(f"the robot model must be one articulation, found {model.articulation_count}")
-        self._model = model
-        self._state = model.state()
-        self._control = model.control()
-
-        rows_per_contact = max(1, 2 * (int(mj.geom_condim.max()) - 1))  # pyramidal cone; elliptic needs fewer
-        self._solver = SolverMuJoCo(
-            model,
-            separate_worlds=True,
-            nconmax=self._contacts_per_world,
-            njmax=self._contacts_per_world * rows_per_contact + 2 * mj.nv,  # + friction loss and limit rows
-            integrator=int(mj.opt.integrator),
-            cone=int(mj.opt.cone),
-            solver=int(mj.opt.solver),
-            iterations=int(mj.opt.iterations),
-            ls_iterations=int(mj.opt.ls_iterations),
-            tolerance=float(mj.opt.tolerance),
-            ls_tolerance=float(mj.opt.ls_tolerance),
-            impratio=float(mj.opt.impratio),
-            kinematic_switchable_roots=False,
-        )
-        solver = self._solver
-        self._observables = solver.observables({SolverMuJoCo.ObservableKind.OVERFLOW})
-
-        # Template-world index maps: MuJoCo entity -> Newton entity (world 0 holds the template's indices).
-        body_of_mj = solver.mjc_body_to_newton.numpy()[0].tolist()
-        joint_of_mj = solver.mjc_jnt_to_newton_jnt.numpy()[0].tolist()
-        shape_of_mj = solver.mjc_geom_to_newton_shape.numpy()[0].tolist()
-        mj_model = solver.mj_model
-        mj_joints = [joint_of_mj.index(j) for j in joints]
-        mj_root = joint_of_mj.index(root[0])
-        self._root_qpos = int(mj_model.jnt_qposadr[mj_root])
-        self._root_qvel = int(mj_model.jnt_dofadr[mj_root])
-        self._joint_qpos = self._long([mj_model.jnt_qposadr[j] for j in mj_joints])
-        self._joint_qvel = self._long([mj_model.jnt_dofadr[j] for j in mj_joints])
-        self._foot_bodies = self._long([body_of_mj.index(template.shape_body[s]) for s in foot_sites])
-        self._foot_offsets = torch.tensor(
-            [list(template.shape_transform[s])[:3] for s in foot_sites], dtype=torch.float32, device=self.device
-        )
-        roles = []
-        for shape in shape_of_mj:
-            if shape == floor:
-                roles.append(_ROLE_FLOOR)
-            elif shape in foot_geoms:
-                roles.append(foot_geoms.index(shape))
-            else:
-                roles.append(robot.num_feet if template.shape_body[shape] >= 0 else _ROLE_OTHER)
-        self._geom_role = wp.array(roles, dtype=wp.int32)
-
-        # Newton-side layout of one world.
-        n = self.num_worlds
-        self._newton_root_q = template.joint_q_start[root[0]]
-        self._newton_root_qd = template.joint_qd_start[root[0]]
-        self._joint_coords = self._long([template.joint_q_start[j] for j in joints])
-        self._joint_dofs = self._long([template.joint_qd_start[j] for j in joints])
-        target_start = model.joint_target_q_start.numpy()
-        self._target_coords = self._long([target_start[j] for j in joints])
-        self._trunk = trunk
-        self._collider_shapes = self._long(geoms)
-
-        # Zero-copy torch views of the Warp arrays this backend writes or reads, one row per world.
-        self._joint_q = wp.to_torch(self._state.joint_q).view(n, -1)
-        self._joint_qd = wp.to_torch(self._state.joint_qd).view(n, -1)
-        self._body_f = wp.to_torch(self._state.body_f).view(n, -1, 6)
-        self._target_q = wp.to_torch(self._control.joint_target_q).view(n, -1)
-        self._ke = wp.to_torch(model.joint_target_ke).view(n, -1)
-        self._kd = wp.to_torch(model.joint_target_kd).view(n, -1)
-        self._gravity = wp.to_torch(model.gravity)[:n]
-        self._mass = wp.to_torch(model.body_mass).view(n, -1)
-        self._inv_mass = wp.to_torch(model.body_inv_mass).view(n, -1)
-        self._inertia = wp.to_torch(model.body_inertia).view(n, -1, 3, 3)
-        self._inv_inertia = wp.to_torch(model.body_inv_inertia).view(n, -1, 3, 3)
-        # MuJoCo's compiler puts a massless body's inertial frame (the feet here) at the body's offset from its
-        # parent, Newton at the body origin; it sets the body's inverse weight, hence its contacts' softness.
-        # Newton pushes body_com into MuJoCo on inertia updates, so give it MuJoCo's frames.
-        mj_bodies = [b for b, newton_body in enumerate(body_of_mj) if newton_body >= 0]
-        body_com = wp.to_torch(model.body_com).view(n, -1, 3)
-        body_com[:, self._long(body_of_mj[b] for b in mj_bodies)] = torch.tensor(
-            mj_model.body_ipos[mj_bodies], dtype=torch.float32, device=self.device
-        )
-        self._trunk_com = body_com[0, trunk].clone()  # Newton's free-joint velocity is that of this point
-        self._mu = wp.to_torch(model.shape_material_mu).view(n, -1)
-        data = solver.mjw_data
-        self._qpos = wp.to_torch(data.qpos)
-        self._qvel = wp.to_torch(data.qvel)
-        self._xpos = wp.to_torch(data.xpos)
-        self._xmat = wp.to_torch(data.xmat)
-        self._overflow = wp.to_torch(self._observables.overflow)
-        self._overflow_seen = torch.zeros_like(self._overflow)
-        self._base = {
-            name: view[0].clone()
-            for name, view in (
-                ("gravity", self._gravity),
-                ("mass", self._mass),
-                ("inv_mass", self._inv_mass),
-                ("inertia", self._inertia),
-                ("inv_inertia", self._inv_inertia),
-            )
-        }
-
-        # World masks shared with Warp: (N + 1,) for SolverMuJoCo.reset (last entry: global world), (N,) for FK.
-        self._mask = torch.zeros(n + 1, dtype=torch.bool, device=self.device)
-        self._wp_world_mask = wp.from_torch(self._mask, dtype=wp.bool)
-        self._wp_articulation_mask = wp.from_torch(self._mask[:n], dtype=wp.bool)
-
-        # Readings (N rows) and the contact-flag scratch the kernel writes.
-        nf = self.robot.num_feet
-        self._wp_foot_contact = wp.zeros((n, nf), dtype=wp.int32)
-        self._wp_body_contact = wp.zeros(n, dtype=wp.int32)
-        self._foot_contact = torch.zeros(n, nf, dtype=torch.bool, device=self.device)
-        self._body_contact = torch.zeros(n, dtype=torch.bool, device=self.device)
-        self._foot_pos = torch.zeros(n, nf, 3, device=self.device)
-        self._reset_state = standing_state(self.robot, n, device=self.device)
-
-        # Recompute every derived MuJoCo constant once with mujoco_warp's own kernels, as later per-world edits
-        # will: worlds an edit leaves alone then keep bit-identical constants.
-        solver.notify_model_changed(
-            newton.ModelFlags.MODEL_PROPERTIES
-            | newton.ModelFlags.BODY_INERTIAL_PROPERTIES
-            | newton.ModelFlags.SHAPE_PROPERTIES
-            | newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES
-        )
-        wp.synchronize_device(self._wp_device)  # later work runs on torch's stream (see _scope)
-
-    def _long(self, values) -> torch.Tensor:
-        return torch.tensor([int(v) for v in values], dtype=torch.long, device=self.device)
 
     # ----------------------------------------------------------------------------------------- commands
     def reset(self, world_ids: torch.Tensor, state: KinematicState) -> None:
@@ -455,12 +253,12 @@ class NewtonBackend(SimBackend):
             self._qpos.copy_(torch.where(rows, qpos, self._qpos))
             self._qvel.copy_(torch.where(rows, qvel, self._qvel))
             # Newton's: quaternion w last; centre-of-mass velocity and angular velocity in the world frame.
-            omega = _rotate(quat, ang)
+            omega = quat_rotate(quat, ang)
             q, qd = self._joint_q.clone(), self._joint_qd.clone()
             r, rd = self._newton_root_q, self._newton_root_qd
             q[:, r : r + 3], q[:, r + 3 : r + 6], q[:, r + 6] = pos, quat[:, 1:], quat[:, 0]
             q[:, self._joint_coords] = s.joint_pos
-            qd[:, rd : rd + 3] = lin + torch.linalg.cross(omega, _rotate(quat, self._trunk_com.expand_as(lin)))
+            qd[:, rd : rd + 3] = lin + torch.linalg.cross(omega, quat_rotate(quat, self._trunk_com.expand_as(lin)))
             qd[:, rd + 3 : rd + 6] = omega
             qd[:, self._joint_dofs] = s.joint_vel
             self._joint_q.copy_(torch.where(rows, q, self._joint_q))
@@ -488,7 +286,7 @@ class NewtonBackend(SimBackend):
         self._wp_foot_contact.zero_()
         self._wp_body_contact.zero_()
         wp.launch(
-            _ground_contacts_kernel,
+            ground_contacts_kernel,
             dim=data.naconmax,
             inputs=[
                 data.nacon,
@@ -527,34 +325,3 @@ class NewtonBackend(SimBackend):
             f"mujoco_warp ran out of buffer capacity ({', '.join(names)}) in {int(short.sum())} world(s); "
             f"raise contacts_per_world (now {self._contacts_per_world})"
         )
-
-
-def _resolve_device(device: str | None) -> tuple[torch.device, wp.Device]:
-    """Map a torch device string (``None``: ``cuda:0`` when CUDA is usable, else ``cpu``) to torch and Warp."""
-    if device is None:
-        device = "cuda:0" if torch.cuda.is_available() and wp.is_cuda_available() else "cpu"
-    torch_device = torch.device(device)
-    if torch_device.type == "cpu":
-        return torch_device, wp.get_device("cpu")
-    if torch_device.type != "cuda":
-        raise SimulationError(f"the newton backend runs on 'cpu' or 'cuda', not on '{device}'")
-    if not (torch.cuda.is_available() and wp.is_cuda_available()):
-        raise SimulationError(f"device '{device}' requested but CUDA is not available to both torch and Warp")
-    index = torch_device.index if torch_device.index is not None else torch.cuda.current_device()
-    return torch.device("cuda", index), wp.get_device(f"cuda:{index}")
-
-
-def _find(labels: list[str], name: str, what: str, *, among: list[int] | None = None) -> int:
-    """Index of the one entry whose label's last path component is ``name`` (``among``: candidate indices)."""
-    candidates = range(len(labels)) if among is None else among
-    hits = [i for i in candidates if labels[i].rsplit("/", 1)[-1] == name]
-    if len(hits) != 1:
-        raise SimulationError(f"the robot model needs exactly one {what} named '{name}', found {len(hits)}")
-    return hits[0]
-
-
-def _rotate(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
-    """Rotate ``vec`` (k, 3) by unit quaternions ``quat`` (k, 4), (w, x, y, z)."""
-    w, xyz = quat[:, :1], quat[:, 1:]
-    t = 2.0 * torch.linalg.cross(xyz, vec)
-    return vec + w * t + torch.linalg.cross(xyz, t)
