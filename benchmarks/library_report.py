@@ -6,19 +6,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from gaitlib.training import default_library_dir
-from gaitlib.training.library import entry_names
+from gaitlib.training import Library
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--library", type=Path, default=default_library_dir())
-    args = parser.parse_args()
-    names = entry_names(args.library)
-    metas = {name: json.loads((args.library / name / "metadata.json").read_text()) for name in names}
+    parser.add_argument("--library", type=Path, default=None, help="library folder (default: the shipped one)")
+    library = Library(parser.parse_args().library)
+    metas = {entry.name: entry.metadata for entry in library.entries()}
     columns = "training time (min) | iterations | samples | fall rate | joint RMSE (rad) | speed (m/s) | reference"
     print(f"| gait | {columns} (m/s) | episodes |")
     print("|---|---|---|---|---|---|---|---|---|")

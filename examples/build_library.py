@@ -13,11 +13,10 @@ import argparse
 from pathlib import Path
 
 from gaitlib.gaits import get_gait
-from gaitlib.strategies import build_table, save_table
-from gaitlib.training import get_preset, load_entry
+from gaitlib.strategies.fitting import fit_library
+from gaitlib.training import Library, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
-from gaitlib.transition_net import FitConfig, fit, save_net
-from gaitlib.transitions import CollectConfig, collect, read
+from gaitlib.transitions import CollectConfig, collect, read_all
 
 GAITS = ("pace", "stand", "trot")  # shipped descriptions (gaitlib/gaits/descriptions/*.toml)
 
@@ -28,6 +27,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=20_000, help="transition samples to collect")
     parser.add_argument("--library", type=Path, default=Path("examples_library"))
     args = parser.parse_args()
+    library = Library(args.library)
 
     for gait in GAITS:  # each gait is trained alone: adding one never touches the others
         result = train_gait(
@@ -44,14 +44,10 @@ def main() -> None:
         print(f"{gait}: fall rate {result.evaluation.fall_rate:.2f} after {args.minutes:g} min")
 
     data = Path("data") / "examples_transitions.h5"  # rerunning resumes the collection
-    collect(data, library=args.library, gaits=sorted(GAITS), config=CollectConfig(samples=args.samples, push_max=400))
-    samples = read(data)
-    fitted = fit(samples, FitConfig())
-    save_net(args.library / "transition_net" / "net.pt", fitted)
-    identities = {g: load_entry(args.library, g).identity for g in GAITS}
-    save_table(args.library / "tmt" / "tmt.json", build_table(samples, identities=identities, source=str(data)))
-    for (m, n), accuracy in fitted.validation_accuracy.items():
-        print(f"transition-net {m}->{n}: {100 * accuracy:.1f}% balanced validation accuracy")
+    collect(data, library=library, gaits=GAITS, config=CollectConfig(samples=args.samples, push_max=400))
+    report = fit_library(library, read_all([data]), sources=[data])
+    for pair, accuracy in report.accuracy()["latent"].items():
+        print(f"transition-net {pair}: {100 * accuracy:.1f}% balanced validation accuracy")
 
 
 if __name__ == "__main__":

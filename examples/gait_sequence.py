@@ -13,7 +13,6 @@ import torch
 
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
-from gaitlib.training import default_library_dir
 
 
 def main() -> None:
@@ -23,7 +22,7 @@ def main() -> None:
     parser.add_argument("--settle", type=float, default=1.5, help="time in a gait before the next request, s")
     args = parser.parse_args()
 
-    setup = load_switching(default_library_dir())
+    setup = load_switching(None)  # the shipped library (or $GAITLIB_LIBRARY)
     sequence = [setup.gait_index(g) for g in args.sequence.split(",")]
     sim = make_backend("auto", num_worlds=1)
     try:

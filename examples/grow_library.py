@@ -14,11 +14,9 @@ import argparse
 from pathlib import Path
 
 from gaitlib.gaits import get_gait
-from gaitlib.strategies import build_table, save_table
-from gaitlib.training import get_preset, load_entry
-from gaitlib.training.library import entry_names
+from gaitlib.strategies.fitting import fit_library
+from gaitlib.training import Library, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
-from gaitlib.transition_net import FitConfig, fit, save_net
 from gaitlib.transitions import CollectConfig, collect, read_all
 
 
@@ -31,7 +29,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=20_000)
     args = parser.parse_args()
 
-    before = {g: load_entry(args.library, g).identity for g in entry_names(args.library)}
+    before = Library(args.library).identities()
     train_gait(
         TrainRequest(
             description=get_gait(args.gait),
@@ -43,24 +41,17 @@ def main() -> None:
             eval_episodes=32,
         )
     )
-    gaits = entry_names(args.library)
-    assert all(load_entry(args.library, g).identity == i for g, i in before.items())  # old policies untouched
+    library = Library(args.library)  # read afresh: it now holds the new gait
+    gaits = library.gaits()
+    assert all(library.identities()[g] == i for g, i in before.items())  # old policies untouched
 
     new_pairs = tuple((m, n) for m in gaits for n in gaits if m != n and args.gait in (m, n))
     new_data = args.old_data.with_name(f"{args.old_data.stem}_{args.gait}.h5")
-    collect(
-        new_data,
-        library=args.library,
-        gaits=gaits,
-        config=CollectConfig(samples=args.samples, push_max=400, pairs=new_pairs),
-    )
-    samples = read_all([args.old_data, new_data])  # merged by gait name
-    fitted = fit(samples, FitConfig())
-    save_net(args.library / "transition_net" / "net.pt", fitted)
-    identities = dict(zip(samples.header.gaits, samples.header.identities, strict=True))
-    save_table(args.library / "tmt" / "tmt.json", build_table(samples, identities=identities, source="old + new"))
-    for (m, n), accuracy in sorted(fitted.validation_accuracy.items()):
-        print(f"{m}->{n}: {100 * accuracy:.1f}%")
+    collect(new_data, library=library, config=CollectConfig(samples=args.samples, push_max=400, pairs=new_pairs))
+    files = [args.old_data, new_data]
+    report = fit_library(library, read_all(files), sources=files)  # old and new samples, merged by gait name
+    for pair, accuracy in sorted(report.accuracy()["latent"].items()):
+        print(f"{pair}: {100 * accuracy:.1f}%")
 
 
 if __name__ == "__main__":

@@ -9,8 +9,7 @@ import pytest
 import torch
 
 from gaitlib.gaits import get_gait
-from gaitlib.training import LibraryError, get_preset, load_entry
-from gaitlib.training.library import entry_names
+from gaitlib.training import Library, LibraryError, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 
 def request(tmp_path, gait="stand", **kw) -> TrainRequest:
@@ -42,7 +41,7 @@ def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
     assert [s.iteration for s in seen] == [1, 2]
     assert seen[-1].samples == 2 * 4 * 8 and seen[-1].samples_per_s > 0
     assert set(seen[-1].reward_terms) == {"pose", "joint_velocity", "end_effector", "root_pose", "root_velocity"}
-    entry = load_entry(tmp_path / "library", "stand")
+    entry = Library(tmp_path / "library").entry("stand")
     first = torch.load(tmp_path / "runs" / "stand" / "checkpoints" / "model_1.pt", weights_only=False)
     assert first["iter"] == 1 and first["infos"]["gait"] == "stand" and first["infos"]["samples"] == 32
     final = entry.policy.actor.state_dict()
@@ -57,7 +56,7 @@ def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
 
 def test_latent_and_value_have_documented_shapes(trained) -> None:
     tmp_path, _, _ = trained
-    entry = load_entry(tmp_path / "library", "stand")
+    entry = Library(tmp_path / "library").entry("stand")
     from tensordict import TensorDict
 
     obs = TensorDict({"policy": torch.randn(5, 158), "privileged": torch.randn(5, 14)}, batch_size=[5])
@@ -71,7 +70,7 @@ def test_onnx_export_has_a_batch_axis_and_matches_the_torch_actor(trained) -> No
     from tensordict import TensorDict
 
     tmp_path, _, _ = trained
-    entry = load_entry(tmp_path / "library", "stand")
+    entry = Library(tmp_path / "library").entry("stand")
     onnx_file = tmp_path / "library" / "stand" / "policy.onnx"
     session = onnxruntime.InferenceSession(str(onnx_file), providers=["CPUExecutionProvider"])
     assert [(io.name, io.shape) for io in session.get_inputs()] == [("obs", ["batch", 158])]
@@ -86,7 +85,7 @@ def test_training_one_gait_leaves_other_entries_untouched(tmp_path) -> None:
     first = train_gait(request(tmp_path, iterations=1))
     before = {p.name: p.read_bytes() for p in first.entry.iterdir()}
     train_gait(request(tmp_path, gait="trot", iterations=1))
-    assert entry_names(tmp_path / "library") == ["stand", "trot"]
+    assert Library(tmp_path / "library").gaits() == ("stand", "trot")
     assert {p.name: p.read_bytes() for p in first.entry.iterdir()} == before
 
 
@@ -104,7 +103,7 @@ def test_resume_continues_from_the_checkpoint(tmp_path) -> None:
     result = train_gait(request(tmp_path, iterations=3, resume=True), on_iteration=seen.append)
     assert [s.iteration for s in seen] == [2, 3]
     assert result.samples == 3 * 32 and result.iterations == 3
-    rows = load_entry(tmp_path / "library", "stand").metadata["training"]["curve"]["rows"]
+    rows = Library(tmp_path / "library").entry("stand").metadata["training"]["curve"]["rows"]
     assert [row[0] for row in rows] == [1, 2, 3]  # the curve goes on across the resume
 
 
@@ -150,7 +149,7 @@ def _copy_entry(trained, tmp_path):
 
 def test_missing_entry_is_a_clear_error(tmp_path) -> None:
     with pytest.raises(LibraryError, match="no library entry for gait 'pace'"):
-        load_entry(tmp_path, "pace")
+        Library(tmp_path).entry("pace")
 
 
 def test_entry_of_another_format_version_is_refused(trained, tmp_path) -> None:
@@ -160,7 +159,7 @@ def test_entry_of_another_format_version_is_refused(trained, tmp_path) -> None:
     meta["format_version"] = 99
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(LibraryError, match="format version 99"):
-        load_entry(library, "stand")
+        Library(library).entry("stand")
 
 
 def test_entry_with_another_observation_layout_is_refused(trained, tmp_path) -> None:
@@ -170,18 +169,18 @@ def test_entry_with_another_observation_layout_is_refused(trained, tmp_path) -> 
     meta["observation"]["reference_offsets"] = [1, 2, 3, 4]
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(LibraryError, match="another observation layout"):
-        load_entry(library, "stand")
+        Library(library).entry("stand")
 
 
 def test_damaged_weights_are_refused(trained, tmp_path) -> None:
     library = _copy_entry(trained, tmp_path)
     (library / "stand" / "policy.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(LibraryError, match="damaged"):
-        load_entry(library, "stand")
+        Library(library).entry("stand")
 
 
 def test_garbage_metadata_is_refused(trained, tmp_path) -> None:
     library = _copy_entry(trained, tmp_path)
     (library / "stand" / "metadata.json").write_text("{not json")
     with pytest.raises(LibraryError, match="unreadable metadata"):
-        load_entry(library, "stand")
+        Library(library).entry("stand")

@@ -104,10 +104,10 @@ def eval_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Evaluate a library policy under paper Table 1 randomization: fall rate, tracking errors, episode length."""
-    from gaitlib.training import default_library_dir, load_entry
+    from gaitlib.training import Library
     from gaitlib.training.evaluate import evaluate_policy
 
-    entry = load_entry(library or default_library_dir(), gait)
+    entry = Library(library).entry(gait)
     result = evaluate_policy(
         entry.policy,
         entry.clip,

@@ -22,6 +22,7 @@ from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
 from gaitlib.training import Library
+from gaitlib.training.policy import per_gait
 from gaitlib.transitions import CollectConfig, collect
 
 __all__ = ["CollectThroughput", "measure_collect_throughput"]
@@ -90,16 +91,11 @@ def _rollout_steps_per_s(setup, worlds: int, seconds: float, push_max: float, ba
         gaits = torch.arange(worlds, device=env.device) % len(setup.gaits)
         env.reset_worlds(torch.arange(worlds, device=env.device), gait=gaits)
         policies = [e.policy.to(env.device) for e in setup.entries]
-        rows = [(gaits == g).nonzero().squeeze(1) for g in range(len(policies))]
-        actions = torch.zeros(worlds, env.num_actions, device=env.device)
         steps = 0
         with torch.inference_mode():
             start = time.perf_counter()
             while time.perf_counter() - start < seconds:
-                obs = env.get_observations()
-                for policy, ids in zip(policies, rows, strict=True):
-                    actions[ids] = policy.act(obs[ids])
-                env.step(actions)
+                env.step(per_gait(policies, gaits, env.get_observations()))
                 steps += 1
             elapsed = time.perf_counter() - start
         return steps * worlds / elapsed

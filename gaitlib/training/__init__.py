@@ -6,8 +6,6 @@ from gaitlib.training.library import (
     LibraryError,
     default_library_dir,
     gait_order,
-    load_entry,
-    save_entry,
 )
 from gaitlib.training.presets import TrainPreset, get_preset, preset_names
 
@@ -19,7 +17,5 @@ __all__ = [
     "default_library_dir",
     "gait_order",
     "get_preset",
-    "load_entry",
     "preset_names",
-    "save_entry",
 ]

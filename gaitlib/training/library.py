@@ -14,7 +14,8 @@ them in. Folders whose name starts with ``.`` (temporary or replaced entries) ar
 ``<library>/<gait>/`` holds ``policy.pt`` (actor and critic weights with their observation normalizers),
 ``policy.onnx`` (the deterministic actor, normalizer included) and ``metadata.json`` (format version, the gait
 description, observation and action layout, network sizes, how it was trained and how well it did, versions,
-and the SHA-256 of ``policy.pt`` that identifies the entry to transition data and transition-nets).
+the SHA-256 of ``policy.pt`` that identifies the entry to transition data and transition-nets, and the
+``deployment`` block that lets a policy run from ``policy.onnx`` alone: ``docs/deploying.md``).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.robots import get_robot
+from gaitlib.training.deployment import deployment_block
 from gaitlib.training.export import export_onnx
 from gaitlib.training.policy import GaitPolicy, build_models
 
@@ -48,8 +50,9 @@ __all__ = [
     "gait_order",
 ]
 
-FORMAT_VERSION = 1
-"""Version of the on-disk layout of a library entry; an entry of another version is refused."""
+FORMAT_VERSION = 2
+"""Version of the on-disk layout of a library entry; an entry of another version is refused (2: the ``deployment``
+block, and ``policy.onnx`` with a batch axis of any size)."""
 
 
 class LibraryError(GaitlibError):
@@ -269,6 +272,9 @@ def _save_entry(
             "evaluation": evaluation,
             "versions": _versions(),
             "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
+            "deployment": deployment_block(
+                clip=clip_from_description(description), action=action, onnx_path=staging / "policy.onnx"
+            ),
         }
         (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
         _replace_dir(staging, final)
@@ -291,7 +297,8 @@ def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryE
     if not isinstance(metadata, dict) or metadata.get("format_version") != FORMAT_VERSION:
         version = metadata.get("format_version") if isinstance(metadata, dict) else None
         raise LibraryError(
-            f"library entry '{name}' has format version {version}, this gaitlib reads version {FORMAT_VERSION}"
+            f"library entry '{name}' has format version {version}, this gaitlib reads version {FORMAT_VERSION}; "
+            "retrain it with this gaitlib"
         )
     if metadata.get("observation") != obs_fn.layout():
         raise LibraryError(
@@ -347,15 +354,3 @@ def _versions() -> dict[str, str]:
         "mujoco": version("mujoco"),
     }
 
-
-# Transitional aliases while the trainer and its tests move to Library (removed before this change lands).
-def save_entry(library: Path, **fields) -> Path:
-    return Library(library).save_entry(**fields)
-
-
-def load_entry(library: Path, name: str) -> LibraryEntry:
-    return Library(library).entry(name)
-
-
-def entry_names(library: Path) -> list[str]:
-    return list(Library(library).gaits())

@@ -28,7 +28,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
-from gaitlib.training.library import save_entry
+from gaitlib.training.library import Library
 from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
 
@@ -289,8 +289,7 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
         backend=backend_name,
         seed=request.seed + 1,
     )
-    entry = save_entry(
-        request.library,
+    entry = Library(request.library).save_entry(
         description=request.description,
         actor=alg.get_policy(),
         critic=alg.critic,

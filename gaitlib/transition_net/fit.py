@@ -1,6 +1,6 @@
 """Fit a transition-net on collected samples: balanced split, AdamW on BCE, per-pair validation accuracy.
 
-Paper settings (design brief section 6) are the defaults: AdamW, learning rate 5e-4, mini-batch 128, 100 epochs,
+The paper's settings (arXiv:2306.08224) are the defaults: AdamW, learning rate 5e-4, mini-batch 128, 100 epochs,
 BCE on the logit. The fit runs on the CPU with one torch thread: for an MLP this small more threads only
 busy-wait between tiny operations (on 2 busy cores: 0.1 s with one thread against 12 s with two for 120 steps).
 Accuracy is measured in eval mode (dropout off) at a 0.5 probability threshold, on the

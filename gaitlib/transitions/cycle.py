@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from gaitlib.envs import ImitationEnv
-from gaitlib.training.policy import GaitPolicy
+from gaitlib.training.policy import GaitPolicy, per_gait
 from gaitlib.transitions import schema
 from gaitlib.transitions.explicit import EXPLICIT_DIM, explicit_state
 
@@ -71,7 +71,7 @@ class SwitchCycles:
     def step(self) -> None:
         """Advance every world one control step and move its state machine on."""
         env = self.env
-        _, _, dones, extras = env.step(self._per_gait(env.gait, "act", env.get_observations()))
+        _, _, dones, extras = env.step(per_gait(self.policies, env.gait, env.get_observations()))
         fell = dones & ~extras["time_outs"]
         self._steps_left -= 1
         push = env.push_force.norm(dim=1)
@@ -104,20 +104,6 @@ class SwitchCycles:
         batch.chunk[:] = self._chunk
         self._chunk += 1
         return batch
-
-    def _per_gait(self, gait: torch.Tensor, method: str, obs) -> torch.Tensor:
-        """``policy.method(obs rows)`` of each row's gait (one call per gait present)."""
-        out = None
-        for g, policy in enumerate(self.policies):
-            rows = (gait == g).nonzero().squeeze(1)
-            if len(rows) == 0:
-                continue
-            values = getattr(policy, method)(obs[rows])
-            if out is None:
-                out = torch.empty((len(gait), *values.shape[1:]), dtype=values.dtype, device=values.device)
-            out[rows] = values
-        assert out is not None
-        return out
 
     def _restart(self, ids: torch.Tensor, *, new_pair: bool) -> None:
         k = len(ids)
@@ -163,8 +149,8 @@ class SwitchCycles:
         before = env.get_observations()[ids]
         source = env.gait[ids]
         self._source[ids] = source
-        self._latent[ids] = self._per_gait(source, "latent", before)
-        self._value_source[ids] = self._per_gait(source, "value", before)
+        self._latent[ids] = per_gait(self.policies, source, before, method="latent")
+        self._value_source[ids] = per_gait(self.policies, source, before, method="value")
         self._explicit[ids] = explicit_state(before["policy"])
         self._phase_source[ids] = env.phase[ids]
         self._switch_time[ids] = env.episode_length_buf[ids].float() * env.dt
@@ -173,7 +159,7 @@ class SwitchCycles:
         env.switch(ids, dest, phase)
         env.enable_pushes(ids, False)
         self._phase_dest[ids] = phase
-        self._value_dest[ids] = self._per_gait(dest, "value", env.get_observations()[ids])
+        self._value_dest[ids] = per_gait(self.policies, dest, env.get_observations()[ids], method="value")
         self._in_horizon[ids] = True
         self._steps_left[ids] = self._horizon
 
