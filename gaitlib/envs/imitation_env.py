@@ -32,7 +32,7 @@ from gaitlib.envs.reference import ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.gaits import ReferenceClip
-from gaitlib.sim import KinematicState, SimBackend, SimState
+from gaitlib.sim import SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
 
@@ -214,15 +214,7 @@ class ImitationEnv(VecEnv):
         self.reference.start(world_ids, gait_ids, phase, torch.zeros(k, 3, device=self.device), identity)
         ref = self.reference.frame(world_ids=world_ids)
         self._randomize(world_ids)
-        start = KinematicState(
-            root_pos=ref.root_pos,
-            root_quat=ref.root_quat,
-            root_lin_vel=ref.root_lin_vel,
-            root_ang_vel=ref.root_ang_vel,
-            joint_pos=ref.joint_pos,
-            joint_vel=ref.joint_vel,
-        )
-        self.backend.reset(world_ids, start)
+        self.backend.reset(world_ids, ref)
         self._pushes.reset(world_ids.cpu())
         self.episode_length_buf[world_ids] = 0
         self._action[world_ids] = 0.0

@@ -12,28 +12,18 @@ import torch
 
 from gaitlib.gaits import ClipFrame, ReferenceClip
 from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
+from gaitlib.sim import KinematicState
 
 __all__ = ["ReferenceFrame", "ReferenceTracker"]
 
 
 @dataclass
-class ReferenceFrame:
-    """Reference quantities of N worlds in the world frame (see :class:`~gaitlib.gaits.ClipFrame`)."""
+class ReferenceFrame(KinematicState):
+    """Reference quantities of N worlds in the world frame (see :class:`~gaitlib.gaits.ClipFrame`): a kinematic state
+    (where reference state initialization puts a robot) and what the observations and rewards compare."""
 
-    root_pos: torch.Tensor
-    """(N, 3) m."""
-    root_quat: torch.Tensor
-    """(N, 4) (w, x, y, z)."""
-    root_lin_vel: torch.Tensor
-    """(N, 3) world frame, m/s."""
-    root_ang_vel: torch.Tensor
-    """(N, 3) trunk frame, rad/s."""
     heading_lin_vel: torch.Tensor
     """(N, 3) linear velocity in the reference's heading frame, m/s (x: forward speed)."""
-    joint_pos: torch.Tensor
-    """(N, J) rad."""
-    joint_vel: torch.Tensor
-    """(N, J) rad/s."""
     foot_pos_heading: torch.Tensor
     """(N, F, 3) feet relative to the trunk in the heading frame, m."""
     contact: torch.Tensor
