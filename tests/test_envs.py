@@ -207,3 +207,24 @@ def test_preview_switch_shows_the_observations_a_switch_would_give_and_changes_n
     for key in ("policy", "privileged"):  # world 2 at the second candidate: rows are world-major
         assert torch.allclose(preview[key][3], after[key][2], atol=1e-5)
     assert not torch.allclose(preview["policy"][2], preview["policy"][3])
+
+
+def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) -> None:
+    # Library entries store layout() and are refused on load when it differs: a change here means retraining.
+    assert obs_fn.layout() == {
+        "frame": ["joint_pos:12", "projected_gravity:3", "ang_vel_trunk:3", "foot_contact:4", "prev_action:12"],
+        "history": 3,
+        "reference_offsets": [1, 2, 10, 30],
+        "reference_frame": ["joint_pos:12", "root_height:1", "forward_speed:1"],
+        "actor_dim": 158,
+        "privileged_dim": 14,
+    }
+    # The critic sees kp in units of the default stiffness and the push in units of 100 N, at the declared columns.
+    env = make_env(clips, n=2, pushes=PushConfig(max_force=150.0, fixed_force=True, interval=(0.03, 0.04)))
+    for _ in range(3):
+        privileged = env.step(torch.zeros(2, 12))[0]["privileged"]
+    columns = itertools.accumulate([0, *(f.width for f in obs_fn.PRIVILEGED)])
+    where = {f.name: slice(a, a + f.width) for f, a in zip(obs_fn.PRIVILEGED, columns, strict=False)}
+    assert torch.allclose(privileged[:, where["kp"]].squeeze(1), env.world_parameters.kp / 60.0)
+    assert torch.allclose(privileged[:, where["push_force"]] * 100.0, env.push_force)
+    assert torch.allclose(env.push_force.norm(dim=1), torch.full((2,), 150.0))
