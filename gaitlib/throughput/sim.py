@@ -11,7 +11,9 @@ Backend and references are timed in alternating rounds so that a change of machi
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 
@@ -58,68 +60,17 @@ class ThroughputResult:
 
 def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rounds: int = 4) -> ThroughputResult:
     """Time ``backend`` and the plain MuJoCo C references for about ``seconds`` each (s)."""
-    import mujoco
-    from mujoco import rollout
-
-    from gaitlib.sim.mujoco_backend import load_model
-
     n = backend.num_worlds
     targets = torch.tensor(backend.robot.default_joint_pos, device=backend.device).repeat(n, 1)
-    backend.set_pd_targets(targets)
-    for _ in range(int(backend.robot.control_hz)):  # settle 1 s into ground contact
-        backend.step()
-    settled = backend.state()
-    qpos = torch.cat([settled.root_pos, settled.root_quat, settled.joint_pos], 1).double().cpu().numpy()
-    qvel = torch.cat([settled.root_lin_vel, settled.root_ang_vel, settled.joint_vel], 1).double().cpu().numpy()
-
-    model = load_model(backend.robot)
-    datas = [mujoco.MjData(model) for _ in range(n)]
-    for d, qp, qv in zip(datas, qpos, qvel, strict=True):
-        d.qpos[:], d.qvel[:], d.ctrl[:] = qp, qv, qp[7:]
-        mujoco.mj_forward(model, d)
-    bounds = np.linspace(0, n, threads + 1).astype(int)
-    chunks = [range(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True) if hi > lo]
-    pool = ThreadPoolExecutor(len(chunks))
-    substeps = backend.robot.substeps
-
-    def step_chunk(worlds: range) -> None:
-        for i in worlds:
-            mujoco.mj_step(model, datas[i], substeps)
-
-    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    roll_state = np.empty((n, mujoco.mj_stateSize(model, spec)))
-    for i, d in enumerate(datas):
-        mujoco.mj_getState(model, d, roll_state[i], spec)
-    roll_control = np.repeat(qpos[:, None, 7:], substeps, axis=1)
-    roll_datas = [mujoco.MjData(model) for _ in range(threads)]
-    roller = rollout.Rollout(nthread=threads)
+    qpos, qvel = _settle(backend, targets)
 
     def run_backend() -> None:
         backend.set_pd_targets(targets)
         backend.step()
         backend.state()
 
-    def run_mj_step() -> None:
-        list(pool.map(step_chunk, chunks))
-
-    def run_rollout() -> None:
-        nonlocal roll_state
-        out, _ = roller.rollout([model] * n, roll_datas, roll_state, roll_control, nstep=substeps)
-        roll_state = out[:, -1]
-
-    runners = {"env": run_backend, "mj_step": run_mj_step, "rollout": run_rollout}
-    steps = dict.fromkeys(runners, 0)
-    elapsed = dict.fromkeys(runners, 0.0)
-    with roller:
-        for _ in range(rounds):
-            for key, run in runners.items():
-                start = time.perf_counter()
-                while time.perf_counter() - start < seconds / rounds:
-                    run()
-                    steps[key] += n
-                elapsed[key] += time.perf_counter() - start
-    pool.shutdown()
-    rate = {key: steps[key] / elapsed[key] for key in runners}
+    with _mujoco_references(backend, qpos, qvel, threads) as references:
+        rate = _rates({"env": run_backend, **references}, worlds=n, seconds=seconds, rounds=rounds)
     raw = max(rate["mj_step"], rate["rollout"])
     return ThroughputResult(
         backend=backend.name,
@@ -127,7 +78,7 @@ def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rou
         worlds=n,
         threads=threads,
         control_hz=backend.robot.control_hz,
-        substeps=substeps,
+        substeps=backend.robot.substeps,
         seconds=seconds,
         env_steps_per_s=rate["env"],
         raw_steps_per_s=raw,
@@ -135,3 +86,68 @@ def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rou
         raw_rollout_per_s=rate["rollout"],
         ratio=rate["env"] / raw,
     )
+
+
+def _settle(backend: SimBackend, targets: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Hold ``targets`` for 1 s so every world is in ground contact; its (N, nq) qpos and (N, nv) qvel."""
+    backend.set_pd_targets(targets)
+    for _ in range(int(backend.robot.control_hz)):
+        backend.step()
+    settled = backend.state()
+    qpos = torch.cat([settled.root_pos, settled.root_quat, settled.joint_pos], 1).double().cpu().numpy()
+    qvel = torch.cat([settled.root_lin_vel, settled.root_ang_vel, settled.joint_vel], 1).double().cpu().numpy()
+    return qpos, qvel
+
+
+@contextlib.contextmanager
+def _mujoco_references(
+    backend: SimBackend, qpos: np.ndarray, qvel: np.ndarray, threads: int
+) -> Iterator[dict[str, Callable[[], None]]]:
+    """One control step of every world in plain MuJoCo C, from the same states, two ways: ``mj_step`` on a
+    thread pool, and chained ``rollout`` calls (each holding its joints at the starting pose)."""
+    import mujoco
+    from mujoco import rollout
+
+    from gaitlib.sim.mujoco_backend import load_model
+
+    n, substeps = len(qpos), backend.robot.substeps
+    model = load_model(backend.robot)
+    datas = [mujoco.MjData(model) for _ in range(n)]
+    for d, qp, qv in zip(datas, qpos, qvel, strict=True):
+        d.qpos[:], d.qvel[:], d.ctrl[:] = qp, qv, qp[7:]
+        mujoco.mj_forward(model, d)
+    bounds = np.linspace(0, n, threads + 1).astype(int)
+    chunks = [range(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True) if hi > lo]
+    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    roll_state = np.empty((n, mujoco.mj_stateSize(model, spec)))
+    for i, d in enumerate(datas):
+        mujoco.mj_getState(model, d, roll_state[i], spec)
+    roll_control = np.repeat(qpos[:, None, 7:], substeps, axis=1)
+    roll_datas = [mujoco.MjData(model) for _ in range(threads)]
+
+    def step_chunk(worlds: range) -> None:
+        for i in worlds:
+            mujoco.mj_step(model, datas[i], substeps)
+
+    def run_rollout() -> None:
+        nonlocal roll_state
+        out, _ = roller.rollout([model] * n, roll_datas, roll_state, roll_control, nstep=substeps)
+        roll_state = out[:, -1]
+
+    with ThreadPoolExecutor(len(chunks)) as pool, rollout.Rollout(nthread=threads) as roller:
+        yield {"mj_step": lambda: list(pool.map(step_chunk, chunks)), "rollout": run_rollout}
+
+
+def _rates(runners: dict[str, Callable[[], None]], *, worlds: int, seconds: float, rounds: int) -> dict[str, float]:
+    """Control steps per second (all worlds) of each runner, timed in ``rounds`` interleaved turns of
+    ``seconds / rounds`` each so that a change in machine load affects all alike."""
+    steps = dict.fromkeys(runners, 0)
+    elapsed = dict.fromkeys(runners, 0.0)
+    for _ in range(rounds):
+        for key, run in runners.items():
+            start = time.perf_counter()
+            while time.perf_counter() - start < seconds / rounds:
+                run()
+                steps[key] += worlds
+            elapsed[key] += time.perf_counter() - start
+    return {key: steps[key] / elapsed[key] for key in runners}

@@ -235,53 +235,36 @@ class Library:
         ``training`` and ``evaluation``: free-form records of how the policy was made and how good it is.
         """
         self._entries.pop(description.name, None)
-        return _save_entry(
-            self.root, description=description, actor=actor, critic=critic, networks=networks, action=action,
-            training=training, evaluation=evaluation,
-        )
-
-
-def _save_entry(
-    library: Path,
-    *,
-    description: GaitDescription,
-    actor: torch.nn.Module,
-    critic: torch.nn.Module,
-    networks: dict,
-    action: dict,
-    training: dict,
-    evaluation: dict,
-) -> Path:
-    library.mkdir(parents=True, exist_ok=True)
-    final = library / description.name
-    staging = Path(tempfile.mkdtemp(prefix=f".{description.name}.", dir=library))
-    staging.chmod(0o755)  # mkdtemp makes it private; an entry is meant to be shared
-    try:
-        weights = staging / "policy.pt"
-        torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
-        export_onnx(actor, staging / "policy.onnx")
-        metadata = {
-            "format_version": FORMAT_VERSION,
-            "gait": description.name,
-            "description": dataclasses.asdict(description),
-            "robot": "a1",
-            "observation": obs_fn.layout(),
-            "action": action,
-            "networks": networks,
-            "training": training,
-            "evaluation": evaluation,
-            "versions": _versions(),
-            "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
-            "deployment": deployment_block(
-                clip=clip_from_description(description), action=action, onnx_path=staging / "policy.onnx"
-            ),
-        }
-        (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
-        _replace_dir(staging, final)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return final
+        self.root.mkdir(parents=True, exist_ok=True)
+        final = self.root / description.name
+        staging = Path(tempfile.mkdtemp(prefix=f".{description.name}.", dir=self.root))
+        staging.chmod(0o755)  # mkdtemp makes it private; an entry is meant to be shared
+        try:
+            weights = staging / "policy.pt"
+            torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
+            export_onnx(actor, staging / "policy.onnx")
+            metadata = {
+                "format_version": FORMAT_VERSION,
+                "gait": description.name,
+                "description": dataclasses.asdict(description),
+                "robot": "a1",
+                "observation": obs_fn.layout(),
+                "action": action,
+                "networks": networks,
+                "training": training,
+                "evaluation": evaluation,
+                "versions": _versions(),
+                "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
+                "deployment": deployment_block(
+                    clip=clip_from_description(description), action=action, onnx_path=staging / "policy.onnx"
+                ),
+            }
+            (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
+            _replace_dir(staging, final)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        return final
 
 
 def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryEntry:
