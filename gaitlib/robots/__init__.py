@@ -1,7 +1,7 @@
 """Robot registry: a robot is an MJCF file plus the few facts the simulator needs to drive it.
 
 Adding a robot means writing its MJCF and constants module under ``gaitlib/robots/<name>/`` and calling
-:func:`register_robot` with a :class:`RobotSpec` (see ``docs/adding-a-robot.md``).
+:func:`register_robot` with a :class:`RobotSpec` (see ``docs/robot.md``).
 """
 
 from __future__ import annotations
