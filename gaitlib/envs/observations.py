@@ -1,4 +1,4 @@
-"""Observation layout (design brief section 3): one declaration of every field, from which every width, slice and
+"""Observation layout (docs/deploying.md): one declaration of every field, from which every width, slice and
 scale is derived, and the small pure functions that fill it.
 
 Actor observation (158) = state s_t (102) + reference g_t (56):

@@ -1,4 +1,4 @@
-"""Early termination (design brief section 4) as small pure functions over N worlds; each returns (N,) bool."""
+"""Early termination (docs/training.md) as small pure functions over N worlds; each returns (N,) bool."""
 
 from __future__ import annotations
 

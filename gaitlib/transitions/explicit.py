@@ -14,13 +14,12 @@ from gaitlib.envs import observations as obs_fn
 
 __all__ = ["EXPLICIT_DIM", "EXPLICIT_LAYOUT", "explicit_state"]
 
-_KEPT = 12 + 3 + 3 + 4  # the frame minus its 12 previous actions
-EXPLICIT_DIM = obs_fn.HISTORY * _KEPT  # 66
+EXPLICIT_DIM = obs_fn.HISTORY * obs_fn.SENSED.stop  # 66: each frame without its previous actions
 """Size of the explicit state."""
 EXPLICIT_LAYOUT = {
     "frames": obs_fn.HISTORY,
     "order": "newest first",
-    "frame": ["joint_pos:12", "projected_gravity:3", "ang_vel_trunk:3", "foot_contact:4"],
+    "frame": [f"{f.name}:{f.width}" for f in obs_fn.FRAME if f.name != "prev_action"],
     "source": "actor observation (observation latency and noise included), previous actions left out",
 }
 """Description of :data:`EXPLICIT_DIM` stored with transition data."""
@@ -29,4 +28,4 @@ EXPLICIT_LAYOUT = {
 def explicit_state(actor_obs: torch.Tensor) -> torch.Tensor:
     """(N, 66) explicit state from the actor observation (N, 158) laid out as :mod:`gaitlib.envs.observations`."""
     frames = actor_obs[:, : obs_fn.STATE_DIM].reshape(-1, obs_fn.HISTORY, obs_fn.FRAME_DIM)
-    return frames[:, :, :_KEPT].reshape(-1, EXPLICIT_DIM)
+    return frames[:, :, obs_fn.SENSED].reshape(-1, EXPLICIT_DIM)
