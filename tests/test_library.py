@@ -54,7 +54,7 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
     source = np.repeat([0, 1], n // 2)
     batch = TransitionBatch(
         source=source, dest=1 - source, latent=rng.normal(size=(n, 16)), phase_source=rng.random(n),
-        phase_dest=rng.random(n), explicit=rng.normal(size=(n, 66)), value_source=np.zeros(n), value_dest=np.zeros(n),
+        phase_dest=rng.random(n), explicit=rng.normal(size=(n, 66)), value_source=np.ones(n), value_dest=np.ones(n),
         push_force=np.zeros(n), success=np.tile([0, 1], n // 2), switch_time=np.ones(n), world=np.zeros(n),
         chunk=np.zeros(n),
     )

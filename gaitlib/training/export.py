@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import torch
@@ -13,14 +14,18 @@ def export_onnx(actor: torch.nn.Module, path: Path) -> None:
     """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper; the first axis of input
     ``obs`` (N, 158) and output ``actions`` (N, 12) is the batch, of any size N."""
     model = actor.as_onnx(verbose=False).to("cpu").eval()
-    torch.onnx.export(
-        model,
-        model.get_dummy_inputs(),
-        str(path),
-        export_params=True,
-        opset_version=18,
-        input_names=model.input_names,
-        output_names=model.output_names,
-        dynamic_axes={name: {0: "batch"} for name in [*model.input_names, *model.output_names]},
-        dynamo=False,
-    )
+    with warnings.catch_warnings():
+        # The TorchScript exporter is chosen on purpose (an MLP needs nothing of torch.export, which pulls in
+        # onnxscript); its deprecation notices say nothing about this export.
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        torch.onnx.export(
+            model,
+            model.get_dummy_inputs(),
+            str(path),
+            export_params=True,
+            opset_version=18,
+            input_names=model.input_names,
+            output_names=model.output_names,
+            dynamic_axes={name: {0: "batch"} for name in [*model.input_names, *model.output_names]},
+            dynamo=False,
+        )
