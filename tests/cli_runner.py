@@ -1,16 +1,43 @@
-"""Running the ``gaitlib`` command line as a user does: a fresh process, its exit code, stdout and stderr."""
+"""Running the ``gaitlib`` command line as a user does: its exit code, stdout and stderr.
+
+:func:`gaitlib` starts a fresh process (the installed entry point's code path, C-level output included), as every
+command that simulates or writes is tested. :func:`gaitlib_quick` calls the same entry point,
+:func:`gaitlib.cli.main`, inside the test process: for refusals that happen before any work, where a new
+interpreter would spend seconds importing torch to print one line.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 
 
 def gaitlib(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
-    """``gaitlib ARGS...`` in a child process (the installed entry point's code path)."""
+    """``gaitlib ARGS...`` in a child process."""
     return subprocess.run(
         [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
     )
+
+
+def gaitlib_quick(*args: str) -> subprocess.CompletedProcess[str]:
+    """``gaitlib ARGS...`` through :func:`gaitlib.cli.main` in this process, stdout and stderr captured."""
+    from gaitlib.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    argv = sys.argv
+    sys.argv = ["gaitlib", *args]
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                main()
+                code = 0
+            except SystemExit as exit_:
+                code = exit_.code if isinstance(exit_.code, int) else 1
+    finally:
+        sys.argv = argv
+    return subprocess.CompletedProcess(["gaitlib", *args], code, out.getvalue(), err.getvalue())

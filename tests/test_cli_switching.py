@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 
 SHIPPED = Path(__file__).resolve().parents[1] / "library"
 
@@ -69,7 +69,7 @@ def test_unknown_gait_or_strategy_is_one_error_line(switching_library) -> None:
         (("--to", "gallop"), "unknown gait 'gallop'"),
         (("--strategy", "oracle"), "unknown strategy 'oracle'"),
     ):
-        result = gaitlib("run", *args, "--library", str(switching_library))
+        result = gaitlib_quick("run", *args, "--library", str(switching_library))
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and message in lines[0], result.stderr
 
@@ -92,7 +92,7 @@ def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library
 
 
 def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:
-    result = gaitlib("benchmark", "--magnitudes", "0:500", "--library", str(switching_library))
+    result = gaitlib_quick("benchmark", "--magnitudes", "0:500", "--library", str(switching_library))
     assert result.returncode == 2 and "--magnitudes" in result.stderr.strip().splitlines()[0]
 
 

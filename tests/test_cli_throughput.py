@@ -6,7 +6,7 @@ import json
 import re
 
 import pytest
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 
 EXPECTED_KEYS = {"backend", "worlds", "control_hz", "substeps", "env_steps_per_s", "raw_steps_per_s", "ratio"}
 
@@ -23,7 +23,7 @@ def test_throughput_sim_prints_one_json_object() -> None:
 
 
 def test_unknown_backend_is_one_error_line() -> None:
-    result = gaitlib("throughput", "sim", "--backend", "bullet", "--worlds", "2")
+    result = gaitlib_quick("throughput", "sim", "--backend", "bullet", "--worlds", "2")
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         "gaitlib: error: unknown backend 'bullet' (known: auto, mujoco, newton)"
@@ -31,13 +31,13 @@ def test_unknown_backend_is_one_error_line() -> None:
 
 
 def test_zero_worlds_is_one_error_line() -> None:
-    result = gaitlib("throughput", "sim", "--worlds", "0")
+    result = gaitlib_quick("throughput", "sim", "--worlds", "0")
     assert result.returncode == 2
     assert result.stderr.strip() == "gaitlib: error: need at least one world, got 0"
 
 
 def test_help_lists_only_working_commands() -> None:
-    result = gaitlib("--help")
+    result = gaitlib_quick("--help")
     assert result.returncode == 0
     panel = result.stdout.split("Commands")[1]
     listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))

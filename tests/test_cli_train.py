@@ -7,7 +7,7 @@ import math
 import subprocess
 import sys
 
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 
 
 def test_train_then_eval_json(tmp_path) -> None:
@@ -31,7 +31,7 @@ def test_train_then_eval_json(tmp_path) -> None:
 
 
 def test_unknown_gait_is_one_error_line(tmp_path) -> None:
-    result = gaitlib("train", "moonwalk", "--library", str(tmp_path))
+    result = gaitlib_quick("train", "moonwalk", "--library", str(tmp_path))
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         "gaitlib: error: unknown gait 'moonwalk' (known: bound, pace, pronk, stand, trot, walk)"
@@ -39,14 +39,14 @@ def test_unknown_gait_is_one_error_line(tmp_path) -> None:
 
 
 def test_eval_of_a_missing_entry_is_one_error_line(tmp_path) -> None:
-    result = gaitlib("eval", "pace", "--library", str(tmp_path))
+    result = gaitlib_quick("eval", "pace", "--library", str(tmp_path))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gaitlib: error: no library entry for gait 'pace'")
 
 
 def test_unknown_preset_is_one_error_line(tmp_path) -> None:
-    result = gaitlib("train", "stand", "--preset", "gpu-cluster", "--library", str(tmp_path))
+    result = gaitlib_quick("train", "stand", "--preset", "gpu-cluster", "--library", str(tmp_path))
     assert result.returncode == 2
     assert result.stderr.strip() == "gaitlib: error: unknown preset 'gpu-cluster' (known: cpu, paper, tiny)"
 

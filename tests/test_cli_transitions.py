@@ -6,7 +6,7 @@ import json
 
 import h5py
 import pytest
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.cli.options import parse_pairs
@@ -73,7 +73,7 @@ def test_foreign_hdf5_is_one_error_line(tmp_path) -> None:
     path = tmp_path / "foreign.h5"
     with h5py.File(path, "w") as f:
         f["images"] = [1, 2, 3]
-    result = gaitlib("fit", "--data", str(path), "--library", str(tmp_path))
+    result = gaitlib_quick("fit", "--data", str(path), "--library", str(tmp_path))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gaitlib: error:") and "foreign.h5" in lines[0]
