@@ -97,7 +97,7 @@ def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:
 
 
 def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
-    assert (SHIPPED / "transition_net" / "net.pt").is_file() and (SHIPPED / "tmt" / "tmt.json").is_file()
+    assert (SHIPPED / "switching" / "net.pt").is_file() and (SHIPPED / "switching" / "tmt.json").is_file()
     plot = tmp_path / "run.png"
     result = gaitlib("run", "--from", "trot", "--to", "stand", "--plot", str(plot), "--json")
     assert result.returncode == 0, result.stderr

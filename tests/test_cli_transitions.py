@@ -52,8 +52,8 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     report = json.loads(fitted.stdout)
     assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48
     assert 0 < report["balanced_samples"]["latent"] <= 48
-    assert (library / "transition_net" / "net.pt").is_file() and (library / "tmt" / "tmt.json").is_file()
-    assert json.loads((library / "transition_net" / "accuracy.json").read_text()) == report
+    assert sorted(p.name for p in (library / "switching").iterdir()) == ["accuracy.json", "net.pt", "tmt.json"]
+    assert json.loads((library / "switching" / "accuracy.json").read_text()) == report
 
     scored = gaitlib("fit", "--evaluate", "--data", data, "--library", lib, "--json")
     assert scored.returncode == 0, scored.stderr

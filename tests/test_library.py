@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from conftest import copy_library
 
-from gaitlib.errors import TransitionDataError
+from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.strategies.fitting import fit_library
-from gaitlib.training import Library, LibraryError
+from gaitlib.training import Library, LibraryError, publish
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 
 
@@ -65,11 +69,111 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
 
     with pytest.raises(TransitionDataError, match="another 'trot' policy"):  # trot collected with another policy
         fit_library(library, data((library.identities()["stand"], "f" * 64)), sources=["other.h5"], epochs=1)
-    assert not library.net_path.exists() and not library.tmt_path.exists() and not library.accuracy_path.exists()
+    assert not library.switching_dir.exists()
     own = data(tuple(library.identities().values()))
     report = fit_library(library, own, sources=[tmp_path / "own.h5"], inputs=("phase", "latent"), epochs=1)
     written = json.loads(library.accuracy_path.read_text())
     assert written == report.as_dict() and written["input_written"] == "phase"
-    assert written["written"] == ["transition_net/net.pt", "tmt/tmt.json", "transition_net/accuracy.json"]
+    assert written["written"] == ["switching/net.pt", "switching/tmt.json", "switching/accuracy.json"]
     assert set(written["balanced_validation_accuracy"]) == {"phase", "latent"}
     assert written["paper_table_3"]["latent"]["trot-stand"] == pytest.approx(0.7549)  # fractions, like ours
+
+
+# A child process rewrites a library folder and is killed (SIGKILL, as by the OOM killer or `kill -9`) at a chosen
+# point; the library must then hold the old version or the new one, whole.
+_KILLED_WRITER = """
+import os, signal, sys
+from pathlib import Path
+
+import torch
+
+from gaitlib.training import Library, publish
+from gaitlib.transitions import read
+
+root, where = Path(sys.argv[1]), sys.argv[2]
+library = Library(root)
+
+
+def die(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+if where == "before-swap":
+    publish._swap_in = die
+elif where == "after-swap":
+    publish.shutil.rmtree = die  # removes the old version, the step after the exchange
+elif where == "between-renames":  # a system that cannot exchange two folders: the two-rename fallback
+    publish.exchange = lambda a, b: False
+    rename, calls = os.rename, []
+    os.rename = lambda a, b: calls.append(a) or (die() if len(calls) == 2 else rename(a, b))
+elif where == "mid-fit":
+    import gaitlib.strategies.fitting as fitting
+
+    fitting.save_table = die  # the net is written, the TMT and accuracy not yet
+if where == "mid-fit":
+    from gaitlib.strategies.fitting import fit_library
+
+    fit_library(library, read(sys.argv[3]), sources=[sys.argv[3]], epochs=1, seed=1)
+else:
+    entry = library.entry("stand")
+    with torch.no_grad():
+        next(entry.policy.actor.parameters()).add_(1.0)  # new weights: a new identity
+    library.save_entry(
+        description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+        networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+    )
+"""
+
+
+@pytest.mark.parametrize(
+    ("where", "survivor"), [("before-swap", "old"), ("after-swap", "new"), ("between-renames", "old")]
+)
+def test_a_writer_killed_while_replacing_an_entry_leaves_the_old_or_the_new_one(
+    tiny_library, tmp_path, where, survivor
+) -> None:
+    library = copy_library(tiny_library, tmp_path / "library")
+    old = library.identities()
+    done = subprocess.run([sys.executable, "-c", _KILLED_WRITER, str(library.root), where], capture_output=True)
+    assert done.returncode == -signal.SIGKILL, done.stderr.decode()
+    after = Library(library.root)
+    assert after.gaits() == ("stand", "trot") and after.identities()["trot"] == old["trot"]
+    assert (after.identities()["stand"] == old["stand"]) == (survivor == "old")
+    entry = after.entry("stand")  # whole: its checksum and files agree
+    after.save_entry(  # the next write cleans what the killed one left
+        description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+        networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+    )
+    assert sorted(p.name for p in library.root.iterdir() if p.is_dir()) == ["stand", "trot"]
+
+
+def test_a_fit_killed_midway_leaves_the_previous_switching_models_whole(switching_library, tmp_path) -> None:
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    before = {p.name: p.read_bytes() for p in library.switching_dir.iterdir()}
+    data = switching_library.parent / "samples.h5"
+    done = subprocess.run(
+        [sys.executable, "-c", _KILLED_WRITER, str(library.root), "mid-fit", str(data)], capture_output=True
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr.decode()
+    assert {p.name: p.read_bytes() for p in library.switching_dir.iterdir()} == before
+
+
+def test_a_second_writer_of_an_entry_is_refused_in_one_line(tiny_library, tmp_path) -> None:
+    library = copy_library(tiny_library, tmp_path / "library")
+    entry = library.entry("stand")
+    with publish._writer_lock(library.root / "stand"):
+        with pytest.raises(GaitlibError, match=rf"library/stand is being written by process {os.getpid()}$"):
+            library.save_entry(
+                description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+                networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+            )
+    assert library.entry("stand").identity == tiny_library.entry("stand").identity
+
+
+def test_a_library_with_the_old_switching_layout_gets_one_line(tiny_library, tmp_path) -> None:
+    library = copy_library(tiny_library, tmp_path / "library")
+    with pytest.raises(TransitionDataError, match=r"has no transition-net and TMT yet \(run gaitlib fit\)"):
+        library.check_switching()
+    (library.root / "transition_net").mkdir()
+    (library.root / "transition_net" / "net.pt").write_bytes(b"0.1")
+    with pytest.raises(TransitionDataError, match="in the old layout .* run gaitlib fit again"):
+        library.check_switching()

@@ -54,6 +54,7 @@ class SwitchResources:
     def table(self) -> TransitionTable:
         """The library's TMT (with typical values and calibrated thresholds)."""
         if "table" not in self._cache:
+            self.library.check_switching()
             table = load_table(self.library.tmt_path, identities=self.library.identities(self.gaits))
             self._check_gaits("TMT", table.gaits)
             self._cache["table"] = table
@@ -65,6 +66,7 @@ class SwitchResources:
         if "net" not in self._cache:
             from gaitlib.transition_net import load_net
 
+            self.library.check_switching()
             saved = load_net(self.library.net_path, identities=self.library.identities(self.gaits))
             self._check_gaits("transition-net", saved.net.spec.gaits)
             self._cache["net"] = saved.net

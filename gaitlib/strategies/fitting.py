@@ -2,9 +2,10 @@
 
 :func:`fit_library` checks that the data were collected with the library's own policies, fits the transition-net
 for each requested input kind (the paper's Table 3 ablation: latent, phase, explicit), builds the TMT with the
-strategies' calibrated thresholds, and writes the net of the first kind asked for (``latent`` by default), the
-TMT and an accuracy report (``accuracy.json``) into the library. :func:`evaluate_library` scores the library's
-net on other data. ``gaitlib fit``, the examples and the tests all go through these two functions.
+strategies' calibrated thresholds, and publishes the net of the first kind asked for (``latent`` by default), the
+TMT and an accuracy report (``accuracy.json``) together as the library's ``switching/`` folder.
+:func:`evaluate_library` scores the library's net on other data. ``gaitlib fit``, the examples and the tests all
+go through these two functions.
 """
 
 from __future__ import annotations
@@ -107,15 +108,16 @@ def fit_library(
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
     source = ", ".join(map(str, sources))
-    save_net(library.net_path, next(iter(results.values())))
-    save_table(library.tmt_path, build_table(data, identities=identities, source=source))
     fitted = FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
         results=results,
-        written=(Library.NET, Library.TMT, Library.ACCURACY),
+        written=tuple(f"{Library.SWITCHING}/{name}" for name in (Library.NET, Library.TMT, Library.ACCURACY)),
     )
-    write_json(library.accuracy_path, fitted.as_dict())
+    with library.publish_switching() as staging:  # the three replace the library's together, or none does
+        save_net(staging / Library.NET, next(iter(results.values())))
+        save_table(staging / Library.TMT, build_table(data, identities=identities, source=source))
+        write_json(staging / Library.ACCURACY, fitted.as_dict())
     return fitted
 
 
@@ -124,6 +126,7 @@ def evaluate_library(library: Library, data: TransitionData, *, sources: Sequenc
     ``"m-n"`` (0-1). Data of other policies than the library's are refused."""
     identities = dict(zip(data.header.gaits, data.header.identities, strict=True))
     library.check_identities(identities, what=f"transition data {', '.join(map(str, sources))}")
+    library.check_switching()
     saved = load_net(library.net_path, identities=library.identities(data.header.gaits))
     accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, data).items()}
     return {"input": saved.metadata["input"], "data": [str(s) for s in sources], "accuracy": accuracy}

@@ -8,7 +8,7 @@ judged on.) Beside it the table keeps what the ``value`` strategies need: each g
 
 Thresholds of ``value``, ``tmt`` and ``tmt-value`` are calibrated per ordered pair on the same data: each sample is
 scored as the strategy would score its (state, phi_n), and the threshold is the one that best separates successes
-from failures (largest balanced accuracy). The table is written to ``library/tmt/tmt.json`` and, like the
+from failures (largest balanced accuracy). The table is written to ``library/switching/tmt.json`` and, like the
 transition-net, refused at load time when the library's policies are not the ones it was built for.
 """
 

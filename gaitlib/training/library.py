@@ -3,13 +3,17 @@
 A library folder holds one entry per gait and the switching models fitted on its transition data::
 
     <library>/<gait>/metadata.json, policy.pt, policy.onnx   one trained gait (see below)
-    <library>/transition_net/net.pt                          the transition-net (gaitlib fit)
-    <library>/transition_net/accuracy.json                   how well it and its input ablation did
-    <library>/tmt/tmt.json                                   the TMT with the strategies' calibrated thresholds
+    <library>/switching/net.pt                               the transition-net (gaitlib fit)
+    <library>/switching/tmt.json                             the TMT with the strategies' calibrated thresholds
+    <library>/switching/accuracy.json                        how well the net and its input ablation did
+
+Each entry and the ``switching`` folder are published whole (:mod:`gaitlib.training.publish`): a reader, or a
+writer killed at any moment, finds the old version or the new one, never neither and never a mix (a net beside
+the TMT of another fit, say).
 
 Gaits are always in one canonical order, their names sorted (:func:`gait_order`): transition files, the
 transition-net's one-hot gait inputs and the TMT's tables index gaits in that order whatever order a user named
-them in. Folders whose name starts with ``.`` (temporary or replaced entries) are never gaits.
+them in. Folders whose name starts with ``.`` (staging or replaced folders) are never gaits.
 
 ``<library>/<gait>/`` holds ``policy.pt`` (actor and critic weights with their observation normalizers),
 ``policy.onnx`` (the deterministic actor, normalizer included) and ``metadata.json`` (format version, the gait
@@ -20,12 +24,11 @@ the SHA-256 of ``policy.pt`` that identifies the entry to transition data and tr
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import os
-import shutil
-import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +42,7 @@ from gaitlib.robots import get_robot
 from gaitlib.training.deployment import deployment_block
 from gaitlib.training.export import export_onnx
 from gaitlib.training.policy import GaitPolicy, build_models
+from gaitlib.training.publish import recover, staged_folder
 
 __all__ = [
     "FORMAT_VERSION",
@@ -129,12 +133,14 @@ class Library:
     ``root``: the folder (``None``: :func:`default_library_dir`). Nothing is read until asked for.
     """
 
-    NET = "transition_net/net.pt"
-    """The transition-net, relative to the root."""
-    ACCURACY = "transition_net/accuracy.json"
-    """The fit's accuracy report (Table 3 layout), relative to the root."""
-    TMT = "tmt/tmt.json"
-    """The TMT and calibrated thresholds, relative to the root."""
+    SWITCHING = "switching"
+    """The folder of the switching models fitted together, relative to the root (published whole)."""
+    NET = "net.pt"
+    """The transition-net, in :attr:`SWITCHING`."""
+    TMT = "tmt.json"
+    """The TMT and calibrated thresholds, in :attr:`SWITCHING`."""
+    ACCURACY = "accuracy.json"
+    """The fit's accuracy report (Table 3 layout), in :attr:`SWITCHING`."""
 
     def __init__(self, root: Path | str | None = None) -> None:
         self.root = Path(root) if root is not None else default_library_dir()
@@ -145,30 +151,50 @@ class Library:
         return f"Library({str(self.root)!r})"
 
     @property
-    def net_path(self) -> Path:
-        return self.root / self.NET
+    def switching_dir(self) -> Path:
+        return self.root / self.SWITCHING
 
     @property
-    def accuracy_path(self) -> Path:
-        return self.root / self.ACCURACY
+    def net_path(self) -> Path:
+        return self.switching_dir / self.NET
 
     @property
     def tmt_path(self) -> Path:
-        return self.root / self.TMT
+        return self.switching_dir / self.TMT
 
-    def relative(self, path: Path) -> str:
-        """``path`` relative to the root where it lies inside the library, else as given (for records)."""
-        try:
-            return Path(path).resolve().relative_to(self.root.resolve()).as_posix()
-        except ValueError:
-            return str(path)
+    @property
+    def accuracy_path(self) -> Path:
+        return self.switching_dir / self.ACCURACY
+
+    def check_switching(self) -> None:
+        """Refuse, in one line, a library without fitted switching models, or with them in the layout of gaitlib
+        0.1 (``transition_net/`` and ``tmt/``, written one file at a time)."""
+        recover(self.switching_dir)
+        if self.switching_dir.is_dir():
+            return
+        if (self.root / "transition_net" / "net.pt").is_file():
+            raise TransitionDataError(
+                f"library {self.root} keeps its transition-net and TMT in the old layout (transition_net/, tmt/); "
+                "run gaitlib fit again to write switching/"
+            )
+        raise TransitionDataError(f"library {self.root} has no transition-net and TMT yet (run gaitlib fit)")
+
+    def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
+        """A staging folder to write the net, TMT and accuracy report into (names :attr:`NET`, :attr:`TMT`,
+        :attr:`ACCURACY`); they replace the library's together when the ``with`` block ends without an error."""
+        return staged_folder(self.switching_dir)
 
     def gaits(self) -> tuple[str, ...]:
-        """Gaits that have an entry, in canonical order."""
+        """Gaits that have an entry, in canonical order (an entry a killed writer left half-replaced is put back
+        first: see :mod:`gaitlib.training.publish`)."""
         if not self.root.is_dir():
             return ()
+        for old in self.root.glob(".*.old"):
+            recover(old.with_name(old.name[1:-4]))
         return gait_order(
-            p.name for p in self.root.iterdir() if not p.name.startswith(".") and (p / "metadata.json").is_file()
+            p.name
+            for p in self.root.iterdir()
+            if not p.name.startswith(".") and p.name != self.SWITCHING and (p / "metadata.json").is_file()
         )
 
     def order(self, names: Iterable[str] | None = None) -> tuple[str, ...]:
@@ -235,11 +261,7 @@ class Library:
         ``training`` and ``evaluation``: free-form records of how the policy was made and how good it is.
         """
         self._entries.pop(description.name, None)
-        self.root.mkdir(parents=True, exist_ok=True)
-        final = self.root / description.name
-        staging = Path(tempfile.mkdtemp(prefix=f".{description.name}.", dir=self.root))
-        staging.chmod(0o755)  # mkdtemp makes it private; an entry is meant to be shared
-        try:
+        with staged_folder(self.root / description.name) as staging:
             weights = staging / "policy.pt"
             torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
             export_onnx(actor, staging / "policy.onnx")
@@ -260,11 +282,7 @@ class Library:
                 ),
             }
             (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
-            _replace_dir(staging, final)
-        except BaseException:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise
-        return final
+        return self.root / description.name
 
 
 def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryEntry:
@@ -311,18 +329,6 @@ def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryE
         description=description,
         clip=clip_from_description(description),
     )
-
-
-def _replace_dir(staging: Path, final: Path) -> None:
-    """Swap ``staging`` into place as ``final``; the old entry is removed only after the swap."""
-    old = None
-    if final.exists():
-        old = final.with_name(f".{final.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(final, old)
-    os.replace(staging, final)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def _versions() -> dict[str, str]:

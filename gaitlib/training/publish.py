@@ -1,0 +1,120 @@
+"""Publishing a folder in one step: a library entry or the switching models are written into a hidden staging
+folder and then swapped into place, so that a reader, or a process killed at any moment, finds the old folder or
+the new one, never neither and never a mix.
+
+On Linux the swap is ``renameat2(RENAME_EXCHANGE)`` (one system call: atomic); the staging folder then holds the
+old version and is removed. Where the system cannot exchange, the old folder is renamed to ``.<name>.old`` and
+the new one renamed into place; a kill between the two renames leaves ``<name>`` missing, and :func:`recover`
+(which the library calls before it lists or writes) puts the old folder back. Writers of one folder take an
+exclusive lock (``.<name>.lock`` beside it) and remove what killed writers left (``.<name>.*`` folders).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import errno
+import fcntl
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+__all__ = ["exchange", "recover", "staged_folder"]
+
+_AT_FDCWD = -100
+_RENAME_EXCHANGE = 2
+"""From ``linux/fs.h``; see rename(2)."""
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Swap the paths ``a`` and ``b`` atomically; ``False`` (nothing done) where the system cannot."""
+    if sys.platform != "linux":
+        return False
+    libc = ctypes.CDLL(None, use_errno=True)
+    renameat2 = getattr(libc, "renameat2", None)  # glibc >= 2.28
+    if renameat2 is None:
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):  # kernel or file system without exchange
+        return False
+    raise OSError(code, os.strerror(code), str(a))
+
+
+def recover(final: Path) -> None:
+    """Undo a kill between the fallback's two renames: ``.<name>.old`` back to ``<name>`` if that is missing."""
+    old = final.with_name(f".{final.name}.old")
+    if old.is_dir() and not final.exists():
+        os.rename(old, final)
+
+
+@contextlib.contextmanager
+def staged_folder(final: Path) -> Iterator[Path]:
+    """Yield an empty hidden staging folder beside ``final`` to fill; on success it replaces ``final`` in one step,
+    on any exception it is removed and ``final`` is left as it was. Holds ``final``'s writer lock throughout."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    with _writer_lock(final):
+        recover(final)
+        for leftover in final.parent.glob(f".{final.name}.*"):
+            if leftover.is_dir():  # a staging or old folder of a killed writer (the lock says none is running)
+                shutil.rmtree(leftover, ignore_errors=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
+        try:
+            staging.chmod(0o755)  # mkdtemp makes it private; library folders are meant to be shared
+            yield staging
+            _fsync_tree(staging)
+            _swap_in(staging, final)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+
+
+def _swap_in(staging: Path, final: Path) -> None:
+    if not final.exists():
+        os.rename(staging, final)
+    elif exchange(staging, final):
+        shutil.rmtree(staging)  # it now holds the old version
+    else:
+        old = final.with_name(f".{final.name}.old")
+        os.rename(final, old)
+        os.rename(staging, final)
+        shutil.rmtree(old)
+    _fsync(final.parent)
+
+
+@contextlib.contextmanager
+def _writer_lock(final: Path) -> Iterator[None]:
+    from gaitlib.errors import GaitlibError
+
+    with open(final.with_name(f".{final.name}.lock"), "a+") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            raise GaitlibError(f"{final} is being written by process {handle.read().strip() or '?'}") from None
+        handle.truncate(0)
+        handle.write(str(os.getpid()))
+        handle.flush()
+        yield
+
+
+def _fsync_tree(folder: Path) -> None:
+    """Flush the files of ``folder`` and the folder itself to disk (a crash of the machine, not only of the
+    process, then also leaves the old or the new version)."""
+    for path in folder.iterdir():
+        if path.is_file():
+            _fsync(path)
+    _fsync(folder)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
