@@ -177,3 +177,35 @@ def test_a_library_with_the_old_switching_layout_gets_one_line(tiny_library, tmp
     (library.root / "transition_net" / "net.pt").write_bytes(b"0.1")
     with pytest.raises(TransitionDataError, match="in the old layout .* run gaitlib fit again"):
         library.check_switching()
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda meta: meta.pop("action"),
+        lambda meta: meta["action"].update(clip="4.0"),
+        lambda meta: meta["action"].update(scale=float("nan")),
+        lambda meta: meta["action"].pop("type"),
+    ],
+    ids=["no action", "a string clip", "a nan scale", "no type"],
+)
+def test_an_entry_with_damaged_action_settings_gets_one_line(tiny_library, tmp_path, change) -> None:
+    library = copy_library(tiny_library, tmp_path / "library")
+    path = library.root / "trot" / "metadata.json"
+    meta = json.loads(path.read_text())
+    change(meta)
+    path.write_text(json.dumps(meta))
+    with pytest.raises(LibraryError, match=r"^library entry 'trot' has damaged metadata: 'action' needs .*, got "):
+        library.entry("trot")
+
+
+def test_a_missing_gait_folder_is_named_as_missing(tmp_path) -> None:
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies import get_strategy
+
+    root = tmp_path / "library"
+    shutil.copytree(Library().root, root, ignore=shutil.ignore_patterns("stand"))  # the shipped library, no stand
+    setup = load_switching(root)
+    for strategy, what in (("tmt", "TMT"), ("net", "transition-net")):
+        with pytest.raises(TransitionDataError, match=rf"^{what} .* needs gait 'stand', which the library does not"):
+            get_strategy(strategy, setup.resources)

@@ -28,6 +28,7 @@ import contextlib
 import dataclasses
 import hashlib
 import json
+import math
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -305,6 +306,7 @@ def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryE
         raise LibraryError(
             f"library entry '{name}' was trained with another observation layout; retrain it with this gaitlib"
         )
+    _check_action(name, metadata.get("action"))
     weights = folder / "policy.pt"
     if not weights.is_file() or hashlib.sha256(weights.read_bytes()).hexdigest() != metadata.get("sha256"):
         raise LibraryError(f"library entry '{name}' is damaged: policy.pt is missing or does not match its checksum")
@@ -329,6 +331,21 @@ def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryE
         description=description,
         clip=clip_from_description(description),
     )
+
+
+def _check_action(name: str, action: object) -> None:
+    """The action settings every user of an entry reads: a type, and a finite positive scale (rad per action unit)
+    and clip (action units)."""
+
+    def positive(value: object) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+
+    if not (isinstance(action, dict) and isinstance(action.get("type"), str) and positive(action.get("scale"))
+            and positive(action.get("clip"))):
+        raise LibraryError(
+            f"library entry '{name}' has damaged metadata: 'action' needs a type and a finite positive scale and "
+            f"clip, got {json.dumps(action)}"
+        )
 
 
 def _versions() -> dict[str, str]:
