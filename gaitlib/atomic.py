@@ -4,13 +4,14 @@ leaves a half-written file where a good one (or none) was."""
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "save_figure", "write_json"]
+__all__ = ["atomic_path", "fsync_folder", "save_figure", "stale_temporaries", "write_json"]
 
 
 def _umask() -> int:
@@ -19,10 +20,23 @@ def _umask() -> int:
     return mask
 
 
+def fsync_folder(folder: Path) -> None:
+    """Flush ``folder``'s entries (names created, renamed or removed in it) to disk."""
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
+def atomic_path(path: Path, *, durable: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` to write; on success it replaces ``path`` (with the usual
-    permissions, 0666 minus the umask), on any exception it is removed and ``path`` is left as it was."""
+    permissions, 0666 minus the umask), on any exception it is removed and ``path`` is left as it was.
+
+    ``durable``: the written data are flushed to disk before the rename and the rename after it, so that a power
+    loss (not only a killed process) leaves the old or the new file, and what follows is ordered after it.
+    A process killed in between leaves a temporary (see :func:`stale_temporaries`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
@@ -31,10 +45,22 @@ def atomic_path(path: Path) -> Iterator[Path]:
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())
+        if durable:
+            with open(tmp, "rb") as handle:
+                os.fsync(handle.fileno())
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    if durable:
+        fsync_folder(path.parent)
+
+
+def stale_temporaries(path: Path) -> list[Path]:
+    """The temporaries :func:`atomic_path` left beside ``path`` when a process was killed while writing it (remove
+    them only while no other process can be writing ``path``)."""
+    path = Path(path)
+    return sorted(path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"))
 
 
 def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:

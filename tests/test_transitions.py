@@ -1,4 +1,5 @@
-"""Transition samples: the HDF5 schema (round trip, repair, clear errors) and real collections with tiny policies."""
+"""Transition samples: the HDF5 schema (round trip, merged parts, leftovers, clear errors) and real collections
+with tiny policies."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import torch
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions import CollectConfig, collect, explicit_state, read, read_all, schema, validate
 from gaitlib.transitions.schema import COLUMNS, TransitionBatch, TransitionHeader
+from gaitlib.transitions.writer import FAN_IN, open_writer
 
 GAITS = ["stand", "trot"]
 # Short cycles keep the collections to a few seconds; with strong pushes (up to 400 N) the untrained policies fall
@@ -68,12 +70,10 @@ def synthetic(n: int, *, latent_dim: int = 4, start: int = 0, seed: int = 0) -> 
 HEADER = TransitionHeader(gaits=("stand", "trot"), identities=("a" * 64, "b" * 64), latent_dim=4, settings={"h": 2.0})
 
 
-def make_file(path, *batches: TransitionBatch):
-    schema.create(path, gaits=list(HEADER.gaits), identities=list(HEADER.identities), latent_dim=4,
-                  settings=HEADER.settings)
-    with schema.open_for_append(path, expect=HEADER) as target:
+def make_file(path, *batches: TransitionBatch, header: TransitionHeader = HEADER):
+    with open_writer(path, header=header) as writer:
         for batch in batches:
-            schema.append(target.file, batch)
+            writer.append(batch)
     return path
 
 
@@ -85,6 +85,13 @@ def one_line_error(path) -> str:
     return message
 
 
+def assert_same(samples: TransitionBatch, expected: TransitionBatch) -> None:
+    """Every column equal, bit for bit, with the schema's dtypes."""
+    for name, values in expected.columns().items():
+        np.testing.assert_array_equal(getattr(samples, name), values)
+        assert getattr(samples, name).dtype == np.dtype(COLUMNS[name].dtype)
+
+
 # ------------------------------------------------------------------------------------------------------ schema
 def test_batch_fields_are_the_schema_columns() -> None:
     assert [f.name for f in dataclasses.fields(TransitionBatch)] == list(COLUMNS)
@@ -94,51 +101,65 @@ def test_appended_batches_read_back_exactly(tmp_path) -> None:
     first, second = synthetic(5), synthetic(7, start=5, seed=1)
     path = make_file(tmp_path / "t.h5", first, second)
     data = read(path)
-    expected = TransitionBatch.concatenate([first, second])
-    for name, values in expected.columns().items():
-        np.testing.assert_array_equal(getattr(data.samples, name), values)
-        assert getattr(data.samples, name).dtype == np.dtype(COLUMNS[name].dtype)
+    assert_same(data.samples, TransitionBatch.concatenate([first, second]))
     info = validate(path)
     assert info.count == 12 and info.note is None and info.header == HEADER
+    parts = sorted(p.name for p in schema.parts_folder(path).iterdir())
+    assert parts == ["part-000000000000-000000000005.h5", "part-000000000005-000000000012.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5", "t.h5.parts"]  # the lock went with the writer
     with h5py.File(path) as f:
-        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION
+        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION == 2
+        assert f.attrs["count"] == 12 and [int(r) for r in f["parts"]["rows"]] == [5, 7]
+    with h5py.File(schema.parts_folder(path) / parts[1]) as f:
         ds = f["latent"]
-        assert ds.compression == "gzip" and ds.chunks is not None and ds.maxshape == (None, 4)
+        assert ds.compression == "gzip" and ds.fletcher32 and ds.shape == (7, 4)
         assert "description" in ds.attrs and f["push_force"].attrs["units"] == "N"
 
 
-def test_create_refuses_an_existing_file(tmp_path) -> None:
-    path = make_file(tmp_path / "t.h5")
-    with pytest.raises(TransitionDataError, match="already exists"):
-        make_file(path)
+def test_small_parts_are_merged_and_read_the_same(tmp_path) -> None:
+    batches = [synthetic(2, start=2 * i, seed=i) for i in range(2 * FAN_IN + 1)]
+    path = make_file(tmp_path / "t.h5", *batches)
+    parts = sorted(p.name for p in schema.parts_folder(path).iterdir())
+    assert parts == ["part-000000000000-000000000032.h5", "part-000000000032-000000000064.h5",
+                     "part-000000000064-000000000066.h5"]
+    assert_same(read(path).samples, TransitionBatch.concatenate(batches))
 
 
-def test_rows_left_by_an_interrupted_append_are_cut_on_open(tmp_path) -> None:
+def test_leftovers_of_a_killed_writer_are_ignored_then_removed(tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(6))
-    with h5py.File(path, "r+") as f:  # a crash after some datasets grew, before the count was committed
-        for name in ("source", "dest", "latent"):
-            f[name].resize(9, axis=0)
-    assert "3 uncommitted rows" in validate(path).note
+    folder = schema.parts_folder(path)
+    shutil.copy(folder / "part-000000000000-000000000006.h5", folder / "part-000000000006-000000000012.h5")
+    (folder / ".part-000000000006-000000000008.h5.x1.tmp.h5").write_bytes(b"half")
+    (tmp_path / ".t.h5.x2.tmp.h5").write_bytes(b"half an index")
+    assert "1 uncommitted part files are ignored" in validate(path).note
     assert len(read(path).samples) == 6
-    with schema.open_for_append(path, expect=HEADER) as target:
-        assert target.count == 6 and "cut 3 uncommitted rows" in target.note
-        schema.append(target.file, synthetic(2, start=6))
+    with open_writer(path, header=HEADER) as writer:
+        assert writer.count == 6 and "removed 3 uncommitted files" in writer.note
+        writer.append(synthetic(2, start=6))
     info = validate(path)
     assert info.count == 8 and info.note is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5", "t.h5.parts"]
 
 
 def test_appending_with_other_settings_or_identities_is_refused(tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(2))
     with pytest.raises(TransitionDataError, match=r"other settings \(h: 2.0 in the file, 1.0 now\)"):
-        schema.open_for_append(path, expect=dataclasses.replace(HEADER, settings={"h": 1.0}))
+        open_writer(path, header=dataclasses.replace(HEADER, settings={"h": 1.0}))
     with pytest.raises(TransitionDataError, match="other library policies for trot"):
-        schema.open_for_append(path, expect=dataclasses.replace(HEADER, identities=("a" * 64, "c" * 64)))
+        open_writer(path, header=dataclasses.replace(HEADER, identities=("a" * 64, "c" * 64)))
+    make_file(path, synthetic(1, start=2))  # the refusals released the lock
 
 
-def test_truncated_file_is_one_clear_error(tmp_path) -> None:
+def test_truncated_index_or_part_is_one_clear_error(tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(300))
-    data = path.read_bytes()
-    path.write_bytes(data[: len(data) // 2])
+    part = schema.parts_folder(path) / "part-000000000000-000000000300.h5"
+    data = part.read_bytes()
+    part.write_bytes(data[: len(data) // 2])
+    assert "part part-000000000000-000000000300.h5 does not match its checksum" in one_line_error(path)
+    part.unlink()
+    assert "part part-000000000000-000000000300.h5 listed in its index is missing" in one_line_error(path)
+    index = path.read_bytes()
+    path.write_bytes(index[: len(index) // 2])
     assert "corrupt or truncated" in one_line_error(path)
 
 
@@ -153,15 +174,24 @@ def test_foreign_and_non_hdf5_files_are_clear_errors(tmp_path) -> None:
     assert "no transition file" in one_line_error(tmp_path / "missing.h5")
 
 
-def test_other_schema_version_and_short_datasets_are_clear_errors(tmp_path) -> None:
+def test_other_schema_versions_are_clear_errors_and_version_1_is_read_only(tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(5))
-    other = shutil.copy(path, tmp_path / "v2.h5")
-    with h5py.File(other, "r+") as f:
-        f.attrs["schema_version"] = 2
-    assert "schema version 2; this gaitlib reads version 1" in one_line_error(other)
     with h5py.File(path, "r+") as f:
-        f["world"].resize(3, axis=0)
-    assert "inconsistent dataset lengths: 5 samples committed but 'world' has 3 rows" in one_line_error(path)
+        f.attrs["schema_version"] = 3
+    assert "schema version 3; this gaitlib reads versions 1 and 2" in one_line_error(path)
+    old, batch = tmp_path / "v1.h5", synthetic(5)
+    with h5py.File(old, "w") as f:  # version 1: datasets in the file itself, rows past 'count' uncommitted
+        f.attrs.update(schema=schema.SCHEMA_NAME, schema_version=1, gaits=list(HEADER.gaits), latent_dim=4,
+                       library_identities=list(HEADER.identities), settings='{"h": 2.0}', sessions="[]",
+                       created_by="{}", created="2024-01-01T00:00:00+00:00", count=4)
+        for name, values in batch.columns().items():
+            f[name] = values
+    assert_same(read(old).samples, batch.select(slice(0, 4)))
+    assert "version 1 transition file: read only" in validate(old).note
+    before = old.read_bytes()
+    with pytest.raises(TransitionDataError, match="version 1 transition file .* collect into a new file"):
+        open_writer(old, header=HEADER)
+    assert old.read_bytes() == before
 
 
 def test_explicit_state_drops_the_actions_of_each_frame() -> None:
@@ -231,11 +261,9 @@ def test_pushes_are_recorded_and_pairs_can_be_restricted(library, tmp_path) -> N
 
 def test_files_of_a_grown_library_are_read_as_one(tmp_path) -> None:
     def write(path, gaits, identities, batch):
-        schema.create(path, gaits=gaits, identities=identities, latent_dim=4, settings={"file": path.name})
-        with schema.open_for_append(path, expect=TransitionHeader(
-            gaits=tuple(gaits), identities=tuple(identities), latent_dim=4, settings={"file": path.name}
-        )) as target:
-            schema.append(target.file, batch)
+        header = TransitionHeader(gaits=tuple(gaits), identities=tuple(identities), latent_dim=4,
+                                  settings={"file": path.name})
+        make_file(path, batch, header=header)
 
     old = synthetic(10)  # stand (0) <-> trot (1)
     write(tmp_path / "old.h5", ["stand", "trot"], ["s" * 64, "t" * 64], old)

@@ -1,5 +1,5 @@
-"""Transition samples: the HDF5 schema they are stored in, the explicit state, and the collector that draws them
-by switching library policies at random moments and phases."""
+"""Transition samples: the HDF5 schema they are stored in (crash-safe, one writer at a time), the explicit state,
+and the collector that draws them by switching library policies at random moments and phases."""
 
 from gaitlib.transitions.collector import CollectConfig, CollectProgress, CollectResult, collect
 from gaitlib.transitions.combine import read_all

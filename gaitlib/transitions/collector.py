@@ -24,15 +24,17 @@ while the source runs; from the switch on no new push starts (one under way runs
 by the state the switch finds, which is what the transition-net sees. Each sample records the largest push
 magnitude of its source run.
 
-Samples are written in batches through :mod:`gaitlib.transitions.schema`; rerunning with the same output file
-resumes (new random numbers, the count continues, nothing written is lost or repeated), and Ctrl-C writes the
-finished samples still in memory before it propagates.
+Samples are committed in batches through :mod:`gaitlib.transitions.writer` (one writer per file; a kill loses at
+most the batch being written); rerunning with the same output file resumes (new random numbers, the count
+continues, nothing written is lost or repeated), and Ctrl-C writes the finished samples still in memory before it
+propagates. Nothing is created before the request is checked.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -49,6 +51,7 @@ from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.library import Library
 from gaitlib.transitions import schema
 from gaitlib.transitions.cycle import SwitchCycles
+from gaitlib.transitions.writer import open_writer
 
 __all__ = ["CollectConfig", "CollectProgress", "CollectResult", "collect"]
 
@@ -135,7 +138,7 @@ class CollectResult:
     steps_per_sample: float
     """Control steps (summed over worlds) this run took per sample written."""
     note: str | None
-    """What opening the file repaired (rows of an interrupted append), else ``None``."""
+    """What opening the file removed (leftovers of an interrupted run), else ``None``."""
 
 
 def collect(
@@ -157,23 +160,15 @@ def collect(
     names = library.order(gaits)
     pairs = _check(cfg, names)
     header = _header(library, names, pairs, cfg)
-    if not output.exists():
-        schema.create(
-            output, gaits=list(names), identities=list(header.identities), latent_dim=header.latent_dim,
-            settings=header.settings,
-        )
-    target = schema.open_for_append(output, expect=header)
-    sim = None
-    try:
-        counts = _pair_counts(target.file, target.count, len(names))
+    with open_writer(output, header=header) as target:
+        counts = _pair_counts(target.committed, len(names))
         if target.count >= cfg.samples:
             return CollectResult(output, target.count, 0, 0.0, 0.0, _named(counts, names), 0, 0.0, target.note)
         sim = make_backend(header.settings["backend"], num_worlds=cfg.num_worlds, device=cfg.device)
-        run = _start_run(target, sim, library.entries(names), header, pairs, counts, cfg)
-        return _write_until_done(output, target, run, counts, names, cfg, progress)
-    finally:
-        target.close()
-        if sim is not None:
+        try:
+            run = _start_run(target, sim, library.entries(names), header, pairs, counts, cfg)
+            return _write_until_done(output, target, run, counts, names, cfg, progress)
+        finally:
             sim.close()
 
 
@@ -206,8 +201,7 @@ def _header(
 def _start_run(target, sim, entries, header, pairs, counts, cfg: CollectConfig) -> SwitchCycles:
     """The environment and the per-world cycles of this run, with random streams derived from the seed and the
     file's next chunk index (so a resumed run draws new numbers); the run is recorded in the file's sessions."""
-    f, count = target.file, target.count
-    chunk = int(f["chunk"][count - 1]) + 1 if count else 0
+    count, chunk = target.count, target.next_chunk
     env_seed, draw_seed = (int(s) for s in np.random.SeedSequence([cfg.seed, chunk]).generate_state(2))
     action = header.settings["action"]
     env_cfg = EnvConfig(
@@ -217,8 +211,7 @@ def _start_run(target, sim, entries, header, pairs, counts, cfg: CollectConfig) 
         pushes=PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s),
     )
     env = ImitationEnv(sim, [e.clip for e in entries], env_cfg, seed=env_seed)
-    schema.record_session(
-        f,
+    target.record_session(
         {
             "first_chunk": chunk,
             "samples_at_start": count,
@@ -255,7 +248,7 @@ def _write_until_done(output, target, run: SwitchCycles, counts, gaits, cfg: Col
             return
         np.add.at(counts, (batch.source, batch.dest, 0), batch.success)
         np.add.at(counts, (batch.source, batch.dest, 1), 1)
-        count = schema.append(target.file, batch)
+        count = target.append(batch)
         written += len(batch)
 
     def report() -> CollectProgress:
@@ -296,24 +289,28 @@ def _check(cfg: CollectConfig, gaits: tuple[str, ...]) -> list[tuple[str, str]]:
         raise GaitlibError(f"need at least two distinct gaits to collect transitions, got {gaits}")
     if cfg.samples < 1 or cfg.num_worlds < 1 or cfg.batch_size < 1:
         raise GaitlibError("samples, num_worlds and batch_size must be positive")
+    times = (cfg.horizon_s, cfg.warmup_s, cfg.source_extra_s, cfg.push_max, *cfg.push_interval_s)
+    if not all(math.isfinite(t) for t in times):
+        raise GaitlibError("horizon, warm-up, extra source time, push_max and push interval must be finite")
     if cfg.horizon_s <= 0 or cfg.warmup_s < 0 or cfg.source_extra_s < 0 or cfg.push_max < 0:
         raise GaitlibError("horizon must be positive; warm-up, extra source time and push_max not negative")
     if cfg.pairs is None:
         return list(itertools.permutations(gaits, 2))
     pairs = [tuple(p) for p in cfg.pairs]
+    if not pairs:
+        raise GaitlibError("no gait pairs to sample")
     for m, n in pairs:
         if m not in gaits or n not in gaits or m == n:
             raise GaitlibError(f"pair {m}->{n}: both gaits must be among {gaits} and differ")
     return list(dict.fromkeys(pairs))
 
 
-def _pair_counts(f, count: int, num_gaits: int) -> np.ndarray:
-    """(G, G, 2) successes and samples per ordered pair among the first ``count`` rows of ``f``."""
+def _pair_counts(committed: dict[str, np.ndarray], num_gaits: int) -> np.ndarray:
+    """(G, G, 2) successes and samples per ordered pair of the ``committed`` samples."""
     counts = np.zeros((num_gaits, num_gaits, 2), dtype=np.int64)
-    if count:
-        source, dest = f["source"][:count], f["dest"][:count]
-        np.add.at(counts, (source, dest, 0), f["success"][:count])
-        np.add.at(counts, (source, dest, 1), 1)
+    source, dest = committed["source"], committed["dest"]
+    np.add.at(counts, (source, dest, 0), committed["success"])
+    np.add.at(counts, (source, dest, 1), 1)
     return counts
 
 

@@ -1,38 +1,40 @@
-"""The HDF5 file of transition samples: one versioned, self-describing schema, appendable and crash-tolerant.
+"""The transition file: one versioned, self-describing HDF5 schema that a killed writer cannot damage.
 
-Layout (schema ``gaitlib.transitions``, version :data:`SCHEMA_VERSION`): one row per sample in each of the
-datasets of :data:`COLUMNS` (all chunked, gzip-compressed with shuffle and Fletcher-32 checksums, resizable along
-rows; each carries ``description`` and ``units`` attributes). ``L`` is the source actors' latent size (the file
-attribute ``latent_dim``), ``E`` = 66 the explicit state (layout in the attribute ``explicit_layout``).
+Layout (schema ``gaitlib.transitions``, version :data:`SCHEMA_VERSION`) of a file at ``PATH``:
 
-File attributes:
+* ``PATH``, the index: a small HDF5 file holding the header and the list of committed parts. It is only ever
+  replaced whole (written beside it, flushed to disk, renamed over it), never changed in place.
+* ``PATH.parts/part-<first row>-<end row>.h5``: the samples, one row per sample in each dataset of
+  :data:`COLUMNS` (chunked, gzip-compressed with shuffle and Fletcher-32 checksums; each carries ``description``
+  and ``units`` attributes). A part is written under a temporary name, flushed and renamed into place before the
+  index that lists it; it is never changed afterwards. ``L`` is the source actors' latent size (``latent_dim``),
+  ``E`` = 66 the explicit state (layout in ``explicit_layout``).
 
-* ``schema`` (str), ``schema_version`` (int): what this file is; anything else is refused.
-* ``gaits`` (str list): gait names; ``source``/``dest`` index it. ``library_identities`` (str list, same order):
-  SHA-256 of each library entry's weights, so samples never mix policies.
-* ``latent_dim`` (int), ``explicit_layout`` (JSON), ``settings`` (JSON: everything that defines how samples are
-  drawn; a resumed collection must use the same), ``sessions`` (JSON list: one record per collection run with its
-  seed and where it started), ``created_by`` (JSON versions), ``created`` (UTC ISO time).
-* ``count`` (int): samples committed. :func:`append` writes every dataset, then ``count``, then flushes; rows past
-  ``count`` (left by a crash mid-append) are ignored by readers and cut off by :func:`open_for_append`.
+Index attributes: ``schema`` (str), ``schema_version`` (int); ``gaits`` (str list: ``source``/``dest`` index it);
+``library_identities`` (str list, same order: SHA-256 of each library entry's weights, so samples never mix
+policies); ``latent_dim`` (int); ``explicit_layout`` (JSON); ``settings`` (JSON: everything that defines how samples
+are drawn; a resumed collection must use the same); ``sessions`` (JSON list: one record per collection run that
+committed samples); ``created_by`` (JSON versions); ``created`` (UTC ISO time); ``count`` (int: committed samples).
+Index dataset ``parts`` (rows in sample order): ``file`` (name in ``PATH.parts``), ``rows``, ``sha256`` (of the
+part file's bytes). Readers use the listed parts only; part files that are not listed and temporaries (left by a
+killed writer) are ignored, and removed by the next writer (:mod:`gaitlib.transitions.writer`).
+
+Version 1 (one HDF5 file appended in place, the ``count`` attribute committed last) is read, never appended to.
 """
 
 from __future__ import annotations
 
-import contextlib
+import hashlib
+import io
 import json
-import signal
-import threading
-from collections.abc import Iterator
+import re
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-import gaitlib
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import atomic_path, fsync_folder
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT
 from gaitlib.transitions.records import (
@@ -48,266 +50,176 @@ __all__ = [
     "COLUMNS",
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
-    "AppendTarget",
     "Column",
+    "Part",
     "TransitionBatch",
     "TransitionData",
     "TransitionFileInfo",
     "TransitionHeader",
-    "append",
-    "create",
-    "open_for_append",
+    "TransitionIndex",
+    "compare_header",
+    "parts_folder",
     "read",
-    "record_session",
+    "read_part",
+    "scan",
     "validate",
+    "write_index",
+    "write_part",
 ]
 
 SCHEMA_NAME = "gaitlib.transitions"
-"""Value of the ``schema`` file attribute."""
-SCHEMA_VERSION = 1
-"""Version of this layout; files of another version are refused."""
+"""Value of the ``schema`` attribute of an index."""
+SCHEMA_VERSION = 2
+"""Version of this layout; version 1 files are read only, other versions refused."""
+_PART_SCHEMA = "gaitlib.transitions.part"
+_PART_NAME = re.compile(r"part-(\d{12})-(\d{12})\.h5")
+_PART_DTYPE = np.dtype([("file", "S40"), ("rows", "<i8"), ("sha256", "S64")])
+_STEP = 1 << 17
+"""Rows checked at a time in a version 1 file."""
 
 
-@dataclass
-class AppendTarget:
-    """A file opened for appending (a context manager that closes it)."""
+@dataclass(frozen=True)
+class Part:
+    """One committed part file."""
 
-    file: h5py.File
+    file: str
+    """Name in the parts folder: ``part-<first row>-<end row>.h5`` (12 digits each)."""
+    rows: int
+    """Samples in it."""
+    sha256: str
+    """SHA-256 of the file's bytes (hex)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransitionIndex:
+    """What an index (or a version 1 file's attributes) says."""
+
+    header: TransitionHeader
+    parts: tuple[Part, ...]
+    """Committed parts in sample order (empty for version 1)."""
+    sessions: tuple[dict, ...]
+    """One record per collection run (seed, first chunk, samples at its start, ...)."""
+    provenance: dict
+    """``created_by`` (versions, as JSON text) and ``created`` (UTC ISO time)."""
     count: int
-    """Samples present when it was opened (after any repair)."""
-    note: str | None
-    """What :func:`open_for_append` repaired, else ``None``."""
-
-    def close(self) -> None:
-        self.file.close()
-
-    def __enter__(self) -> AppendTarget:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    """Committed samples."""
+    version: int
+    """Schema version of the file."""
 
 
-def create(path: Path, *, gaits: list[str], identities: list[str], latent_dim: int, settings: dict) -> None:
-    """Create an empty transition file at ``path`` (written beside it, then renamed into place).
+def parts_folder(path: Path) -> Path:
+    """Where the parts of the transition file ``path`` live."""
+    return Path(path).with_name(Path(path).name + ".parts")
 
-    Raises :class:`TransitionDataError` if ``path`` exists or the arguments are inconsistent.
-    """
-    path = Path(path)
-    if path.exists():
-        raise TransitionDataError(f"{path} already exists; open it for appending or choose another path")
-    if len(gaits) != len(identities) or len(set(gaits)) != len(gaits) or not 2 <= len(gaits) <= 127:
-        raise TransitionDataError(f"need 2-127 distinct gaits with one identity each, got {gaits} / {identities}")
-    with atomic_path(path) as tmp:
+
+def write_part(path: Path, batch: TransitionBatch, *, start: int) -> Part:
+    """Write ``batch`` (rows ``start`` on, at least one) as a part of the transition file ``path``, durably; it is
+    committed only once an index lists it."""
+    folder = parts_folder(path)
+    if not folder.is_dir():
+        folder.mkdir()
+        fsync_folder(folder.parent)
+    name = f"part-{start:012d}-{start + len(batch):012d}.h5"
+    with atomic_path(folder / name, durable=True) as tmp:
         with h5py.File(tmp, "w") as f:
-            f.attrs["schema"] = SCHEMA_NAME
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            f.attrs["gaits"] = np.array(gaits, dtype=h5py.string_dtype())
-            f.attrs["library_identities"] = np.array(identities, dtype=h5py.string_dtype())
-            f.attrs["latent_dim"] = int(latent_dim)
-            f.attrs["explicit_layout"] = json.dumps(EXPLICIT_LAYOUT)
-            f.attrs["settings"] = json.dumps(settings, sort_keys=True)
-            f.attrs["sessions"] = "[]"
-            f.attrs["created_by"] = json.dumps(
-                {
-                    "gaitlib": gaitlib.__version__,
-                    "h5py": h5py.__version__,
-                    "hdf5": h5py.version.hdf5_version,
-                    "numpy": np.__version__,
-                }
-            )
-            f.attrs["created"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-            f.attrs["count"] = 0
-            for name, column in COLUMNS.items():
-                width = _width(column, latent_dim)
-                row_bytes = np.dtype(column.dtype).itemsize * int(np.prod(width))
+            f.attrs["schema"] = _PART_SCHEMA
+            for column_name, values in batch.columns().items():
+                column = COLUMNS[column_name]
+                row_bytes = values.itemsize * int(np.prod(values.shape[1:]))
                 rows = int(np.clip(2**18 // row_bytes, 64, 4096))
                 ds = f.create_dataset(
-                    name,
-                    shape=(0, *width),
-                    maxshape=(None, *width),
-                    dtype=column.dtype,
-                    chunks=(rows, *width),
-                    compression="gzip",
-                    compression_opts=4,
-                    shuffle=True,
-                    fletcher32=True,
+                    column_name, data=values, chunks=(min(rows, len(values)), *values.shape[1:]),
+                    compression="gzip", compression_opts=4, shuffle=True, fletcher32=True,
                 )
                 ds.attrs["description"] = column.description
                 ds.attrs["units"] = column.units
+        digest = _sha256(tmp)
+    return Part(name, len(batch), digest)
 
 
-def open_for_append(path: Path, *, expect: TransitionHeader) -> AppendTarget:
-    """Open an existing file for appending after checking it against ``expect``.
+def write_index(path: Path, index: TransitionIndex) -> None:
+    """Replace the index of ``path`` with ``index`` (durably: what it lists is on disk before, and the new index
+    after this returns)."""
+    header = index.header
+    with atomic_path(path, durable=True) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["schema"] = SCHEMA_NAME
+            f.attrs["schema_version"] = SCHEMA_VERSION
+            f.attrs["gaits"] = np.array(header.gaits, dtype=h5py.string_dtype())
+            f.attrs["library_identities"] = np.array(header.identities, dtype=h5py.string_dtype())
+            f.attrs["latent_dim"] = int(header.latent_dim)
+            f.attrs["explicit_layout"] = json.dumps(EXPLICIT_LAYOUT)
+            f.attrs["settings"] = json.dumps(header.settings, sort_keys=True)
+            f.attrs["sessions"] = json.dumps(list(index.sessions))
+            f.attrs["created_by"] = index.provenance["created_by"]
+            f.attrs["created"] = index.provenance["created"]
+            f.attrs["count"] = sum(p.rows for p in index.parts)
+            table = np.array([(p.file, p.rows, p.sha256) for p in index.parts], dtype=_PART_DTYPE)
+            f.create_dataset("parts", data=table, maxshape=(None,))
 
-    Rows left past the committed count by an interrupted append are cut off (the returned ``note`` says so).
-    Raises :class:`TransitionDataError` for an unreadable or foreign file, another schema version, other gaits,
-    library identities, latent size or settings.
+
+def scan(path: Path, *, keep: tuple[str, ...] = ()) -> tuple[TransitionIndex, dict[str, np.ndarray]]:
+    """Check ``path`` completely (index, every committed part and row) and return its index and the committed
+    rows of the columns ``keep``.
+
+    Raises a one-line :class:`TransitionDataError` for: a missing, empty, non-HDF5, truncated or corrupt file or
+    part, HDF5 that is not transition data, another schema version, a malformed index, a missing part or one that
+    does not match its checksum, malformed datasets, gait indices out of range.
     """
     path = Path(path)
-    f = _open(path, "r+")
-    try:
-        header, count, lengths, _ = _inspect(f, path)
-        _compare(header, expect, path)
-        note = None
-        if any(n != count for n in lengths.values()):
-            extra = max(lengths.values()) - count
-            for name in COLUMNS:
-                f[name].resize(count, axis=0)
-            f.flush()
-            note = f"{path}: cut {extra} uncommitted rows left by an interrupted append; {count} samples kept"
-        return AppendTarget(file=f, count=count, note=note)
-    except BaseException:
-        f.close()
-        raise
-
-
-def append(file: h5py.File, batch: TransitionBatch) -> int:
-    """Append ``batch``, commit and flush; returns the new sample count. Ctrl-C waits until the batch is on disk."""
-    count = int(file.attrs["count"])
-    latent_dim = int(file.attrs["latent_dim"])
-    if batch.latent.shape[1:] != (latent_dim,) or batch.explicit.shape[1:] != (EXPLICIT_DIM,):
-        raise TransitionDataError(
-            f"batch has latent {batch.latent.shape[1:]} and explicit {batch.explicit.shape[1:]}, "
-            f"the file holds ({latent_dim},) and ({EXPLICIT_DIM},)"
-        )
-    total = count + len(batch)
-    with _sigint_deferred():
-        for name, values in batch.columns().items():
-            ds = file[name]
-            ds.resize(total, axis=0)
-            ds[count:total] = values
-        file.attrs["count"] = total
-        file.flush()
-    return total
-
-
-def record_session(file: h5py.File, session: dict) -> None:
-    """Add a collection run's record (JSON-able: seed, first chunk, samples at start, ...) to ``sessions``."""
-    sessions = json.loads(file.attrs["sessions"])
-    sessions.append(session)
-    file.attrs["sessions"] = json.dumps(sessions)
-    file.flush()
+    if not path.is_file():
+        raise TransitionDataError(f"no transition file at {path}")
+    seen = None
+    while True:
+        with _open(path, str(path)) as f:
+            index = _read_index(f, path)
+            if index.version == 1:
+                return index, _scan_v1(f, index, keep, path)
+        kept: dict[str, list[np.ndarray]] = {name: [] for name in keep}
+        try:
+            for part in index.parts:
+                columns = read_part(path, part, index.header)
+                for name in keep:
+                    kept[name].append(columns[name])
+        except _PartGone as gone:
+            if index == seen:  # not a writer's merge under way: the index lists a part that is not there
+                raise TransitionDataError(f"{path} is damaged: part {gone} listed in its index is missing") from None
+            seen = index
+            continue
+        return index, {name: _joined(values, COLUMNS[name], index.header) for name, values in kept.items()}
 
 
 def validate(path: Path) -> TransitionFileInfo:
-    """Check ``path`` completely (attributes, datasets, every committed row readable).
-
-    Raises a one-line :class:`TransitionDataError` for: a missing file, a file that is not HDF5, a truncated or
-    corrupt file, HDF5 that is not transition data, another schema version, missing or malformed datasets,
-    datasets shorter than the committed count.
-    """
-    path = Path(path)
-    with _open(path, "r") as f:
-        header, count, lengths, sessions = _inspect(f, path)
-        step = 1 << 16
-        for name in COLUMNS:
-            for start in range(0, count, step):
-                _read_rows(f, name, start, min(count, start + step), path)
-        return TransitionFileInfo(header, count, sessions, _tail_note(lengths, count, path))
+    """Check ``path`` completely (see :func:`scan`) and describe it."""
+    return _info(Path(path), scan(path)[0])
 
 
 def read(path: Path) -> TransitionData:
     """Read the committed samples of ``path`` (checked as by :func:`validate`)."""
-    path = Path(path)
-    with _open(path, "r") as f:
-        header, count, lengths, sessions = _inspect(f, path)
-        columns = {name: _read_rows(f, name, 0, count, path) for name in COLUMNS}
-    info = TransitionFileInfo(header, count, sessions, _tail_note(lengths, count, path))
-    return TransitionData(info, TransitionBatch(**columns))
+    index, columns = scan(path, keep=tuple(COLUMNS))
+    return TransitionData(_info(Path(path), index), TransitionBatch(**columns))
 
 
-# ---------------------------------------------------------------------------------------------------- internals
-def _width(column: Column, latent_dim: int) -> tuple[int, ...]:
-    return {None: (), "latent": (latent_dim,), "explicit": (EXPLICIT_DIM,)}[column.width]
-
-
-def _first_line(error: BaseException) -> str:
-    text = str(error).strip()
-    return text.splitlines()[0] if text else type(error).__name__
-
-
-def _open(path: Path, mode: str) -> h5py.File:
-    if not path.is_file():
-        raise TransitionDataError(f"no transition file at {path}")
+def read_part(path: Path, part: Part, header: TransitionHeader) -> dict[str, np.ndarray]:
+    """Every column of the committed ``part`` of ``path``, checked against its checksum and ``header``."""
+    where = f"{path} part {part.file}"
     try:
-        return h5py.File(path, mode)
+        data = (parts_folder(path) / part.file).read_bytes()
+    except FileNotFoundError:
+        raise _PartGone(part.file) from None
+    if hashlib.sha256(data).hexdigest() != part.sha256:
+        raise TransitionDataError(f"{path} is damaged: part {part.file} does not match its checksum")
+    try:
+        with h5py.File(io.BytesIO(data), "r") as f:
+            columns = {name: _rows(f, name, 0, part.rows, header, where) for name in COLUMNS}
     except OSError as error:
-        if not h5py.is_hdf5(path):
-            raise TransitionDataError(f"{path} is not an HDF5 file") from error
-        raise TransitionDataError(f"{path} is a corrupt or truncated HDF5 file ({_first_line(error)})") from error
+        raise TransitionDataError(f"{where} is corrupt ({_first_line(error)})") from error
+    _check_rows(columns, part.rows, header, where)
+    return columns
 
 
-def _read_rows(f: h5py.File, name: str, start: int, stop: int, path: Path) -> np.ndarray:
-    try:
-        return f[name][start:stop]
-    except (OSError, ValueError) as error:
-        raise TransitionDataError(
-            f"{path} is corrupt or truncated: dataset '{name}' rows {start}-{stop} unreadable ({_first_line(error)})"
-        ) from error
-
-
-def _text_list(values: object) -> tuple[str, ...]:
-    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in np.atleast_1d(values))
-
-
-def _inspect(f: h5py.File, path: Path) -> tuple[TransitionHeader, int, dict[str, int], list[dict]]:
-    """Header, committed count, dataset lengths and sessions of an open file; raises on anything malformed."""
-    try:
-        attrs = dict(f.attrs)
-    except (OSError, RuntimeError) as error:
-        raise TransitionDataError(f"{path} is corrupt or truncated ({_first_line(error)})") from error
-    schema = attrs.get("schema")
-    schema = schema.decode() if isinstance(schema, bytes) else schema
-    if schema != SCHEMA_NAME:
-        what = "no 'schema' attribute" if schema is None else f"schema '{schema}'"
-        raise TransitionDataError(f"{path} is an HDF5 file but not gaitlib transition data ({what})")
-    version = attrs.get("schema_version")
-    if version != SCHEMA_VERSION:
-        raise TransitionDataError(
-            f"{path} has transition schema version {version}; this gaitlib reads version {SCHEMA_VERSION}"
-        )
-    try:
-        header = TransitionHeader(
-            gaits=_text_list(attrs["gaits"]),
-            identities=_text_list(attrs["library_identities"]),
-            latent_dim=int(attrs["latent_dim"]),
-            settings=json.loads(attrs["settings"]),
-        )
-        count = int(attrs["count"])
-        sessions = json.loads(attrs["sessions"])
-    except (KeyError, TypeError, ValueError) as error:
-        raise TransitionDataError(f"{path} is damaged: file attribute missing or malformed ({error})") from error
-    lengths = {}
-    for name, column in COLUMNS.items():
-        try:
-            ds = f[name]
-            shape, dtype = ds.shape, ds.dtype
-        except (KeyError, OSError) as error:
-            raise TransitionDataError(f"{path} is damaged: dataset '{name}' missing or unreadable") from error
-        width = _width(column, header.latent_dim)
-        if shape[1:] != width or dtype != np.dtype(column.dtype):
-            raise TransitionDataError(
-                f"{path} is damaged: dataset '{name}' is {dtype} {shape}, expected {column.dtype} (n, {width})"
-            )
-        lengths[name] = shape[0]
-    short = {name: n for name, n in lengths.items() if n < count}
-    if short:
-        name, n = next(iter(short.items()))
-        raise TransitionDataError(
-            f"{path} has inconsistent dataset lengths: {count} samples committed but '{name}' has {n} rows"
-        )
-    return header, count, lengths, sessions
-
-
-def _tail_note(lengths: dict[str, int], count: int, path: Path) -> str | None:
-    extra = max(lengths.values()) - count
-    if extra == 0:
-        return None
-    return f"{path}: {extra} uncommitted rows from an interrupted append are ignored"
-
-
-def _compare(found: TransitionHeader, expect: TransitionHeader, path: Path) -> None:
+def compare_header(found: TransitionHeader, expect: TransitionHeader, path: Path) -> None:
+    """Raise a one-line :class:`TransitionDataError` unless ``found`` (a file's) is ``expect``."""
     if found.gaits != tuple(expect.gaits):
         raise TransitionDataError(f"{path} holds gaits {list(found.gaits)}, not {list(expect.gaits)}")
     changed = [g for g, a, b in zip(found.gaits, found.identities, expect.identities, strict=True) if a != b]
@@ -325,18 +237,150 @@ def _compare(found: TransitionHeader, expect: TransitionHeader, path: Path) -> N
         raise TransitionDataError(f"{path} was collected with other settings ({diffs}); write to a new file")
 
 
-@contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold back Ctrl-C (in the main thread) until the block is done, then raise it."""
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or previous is None:
-        yield
-        return
-    caught = []
-    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+# ---------------------------------------------------------------------------------------------------- internals
+class _PartGone(Exception):
+    """A listed part is not there: damage, or a writer merged it away after the index was read (read again)."""
+
+
+def _width(column: Column, latent_dim: int) -> tuple[int, ...]:
+    return {None: (), "latent": (latent_dim,), "explicit": (EXPLICIT_DIM,)}[column.width]
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _open(file: Path, name: str) -> h5py.File:
+    """Open ``file`` (an index, or a part described as ``name``) for reading."""
+    if file.stat().st_size == 0:
+        raise TransitionDataError(f"{name} is an empty file (0 bytes), not transition data")
     try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        raise KeyboardInterrupt
+        return h5py.File(file, "r")
+    except OSError as error:
+        if not h5py.is_hdf5(file):
+            raise TransitionDataError(f"{name} is not an HDF5 file") from error
+        raise TransitionDataError(f"{name} is a corrupt or truncated HDF5 file ({_first_line(error)})") from error
+
+
+def _text_list(values: object) -> tuple[str, ...]:
+    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in np.atleast_1d(values))
+
+
+def _read_index(f: h5py.File, path: Path) -> TransitionIndex:
+    """The index of an open file; raises on anything malformed."""
+    try:
+        attrs = dict(f.attrs)
+    except (OSError, RuntimeError) as error:
+        raise TransitionDataError(f"{path} is corrupt or truncated ({_first_line(error)})") from error
+    schema = attrs.get("schema")
+    schema = schema.decode() if isinstance(schema, bytes) else schema
+    if schema != SCHEMA_NAME:
+        what = "no 'schema' attribute" if schema is None else f"schema '{schema}'"
+        raise TransitionDataError(f"{path} is an HDF5 file but not gaitlib transition data ({what})")
+    version = attrs.get("schema_version")
+    if version not in (1, SCHEMA_VERSION):
+        raise TransitionDataError(
+            f"{path} has transition schema version {version}; this gaitlib reads versions 1 and {SCHEMA_VERSION}"
+        )
+    try:
+        header = TransitionHeader(
+            gaits=_text_list(attrs["gaits"]),
+            identities=_text_list(attrs["library_identities"]),
+            latent_dim=int(attrs["latent_dim"]),
+            settings=json.loads(attrs["settings"]),
+        )
+        count = int(attrs["count"])
+        sessions = tuple(json.loads(attrs["sessions"]))
+        provenance = {"created_by": str(attrs["created_by"]), "created": str(attrs["created"])}
+        table = f["parts"][()] if version == SCHEMA_VERSION else np.zeros(0, _PART_DTYPE)
+        parts = tuple(Part(row["file"].decode(), int(row["rows"]), row["sha256"].decode()) for row in table)
+    except (KeyError, TypeError, ValueError, OSError) as error:
+        raise TransitionDataError(f"{path} is damaged: index attribute or part list missing or malformed") from error
+    if len(header.gaits) != len(header.identities) or not 2 <= len(header.gaits) <= 127:
+        raise TransitionDataError(f"{path} is damaged: {len(header.gaits)} gaits, {len(header.identities)} identities")
+    index = TransitionIndex(
+        header=header, parts=parts, sessions=sessions, provenance=provenance, count=count, version=int(version)
+    )
+    _check_parts(index, path)
+    return index
+
+
+def _check_parts(index: TransitionIndex, path: Path) -> None:
+    if index.count < 0:
+        raise TransitionDataError(f"{path} is damaged: its sample count is negative ({index.count})")
+    start = 0
+    for part in index.parts:
+        match = _PART_NAME.fullmatch(part.file)
+        if not match or (int(match[1]), int(match[2])) != (start, start + part.rows) or part.rows < 1:
+            raise TransitionDataError(
+                f"{path} is damaged: its part list has '{part.file}' ({part.rows} rows) at row {start}"
+            )
+        start += part.rows
+    if index.version == SCHEMA_VERSION and start != index.count:
+        raise TransitionDataError(f"{path} is damaged: count {index.count} but its parts hold {start} samples")
+
+
+def _rows(f: h5py.File, name: str, start: int, stop: int, header: TransitionHeader, where: str) -> np.ndarray:
+    """Rows ``start`` to ``stop`` of dataset ``name``, checked against the column's dtype and width."""
+    column = COLUMNS[name]
+    width = _width(column, header.latent_dim)
+    try:
+        ds = f[name]
+        if ds.shape[1:] != width or ds.dtype != np.dtype(column.dtype) or ds.shape[0] < stop:
+            raise TransitionDataError(
+                f"{where} is damaged: dataset '{name}' is {ds.dtype} {ds.shape}, expected {column.dtype} "
+                f"({stop}, {', '.join(map(str, width))})"
+            )
+        return ds[start:stop]
+    except (KeyError, OSError, ValueError) as error:
+        raise TransitionDataError(
+            f"{where} is corrupt or truncated: dataset '{name}' rows {start}-{stop} unreadable ({_first_line(error)})"
+        ) from error
+
+
+def _check_rows(columns: dict[str, np.ndarray], rows: int, header: TransitionHeader, where: str) -> None:
+    for name in ("source", "dest"):
+        values = columns[name][:rows]
+        bad = values[(values < 0) | (values >= len(header.gaits))]
+        if len(bad):
+            raise TransitionDataError(
+                f"{where} is damaged: '{name}' holds gait index {int(bad[0])}, the file has {len(header.gaits)} gaits"
+            )
+
+
+def _scan_v1(f: h5py.File, index: TransitionIndex, keep: tuple[str, ...], path: Path) -> dict[str, np.ndarray]:
+    """Check a version 1 file's committed rows; returns those of ``keep``."""
+    kept: dict[str, list[np.ndarray]] = {name: [] for name in keep}
+    for start in range(0, index.count, _STEP):
+        stop = min(index.count, start + _STEP)
+        columns = {name: _rows(f, name, start, stop, index.header, str(path)) for name in COLUMNS}
+        _check_rows(columns, stop - start, index.header, str(path))
+        for name in keep:
+            kept[name].append(columns[name])
+    return {name: _joined(values, COLUMNS[name], index.header) for name, values in kept.items()}
+
+
+def _joined(values: list[np.ndarray], column: Column, header: TransitionHeader) -> np.ndarray:
+    if values:
+        return np.concatenate(values)
+    return np.zeros((0, *_width(column, header.latent_dim)), dtype=column.dtype)
+
+
+def _info(path: Path, index: TransitionIndex) -> TransitionFileInfo:
+    if index.version == 1:
+        note = f"{path} is a version 1 transition file: read only (collect into a new file to add samples)"
+    else:
+        listed = {p.file for p in index.parts}
+        folder = parts_folder(path)
+        stray = [p for p in folder.glob("part-*.h5") if p.name not in listed] if folder.is_dir() else []
+        note = f"{path}: {len(stray)} uncommitted part files are ignored" if stray else None
+    return TransitionFileInfo(index.header, index.count, list(index.sessions), note)
