@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -38,11 +39,22 @@ from gaitlib.errors import GaitlibError
 from gaitlib.meta import DEADLINE_S, SwitchingSetup
 from gaitlib.sim import make_backend, resolve_backend_name
 
-__all__ = ["FORMAT_NAME", "CellCounts", "SweepConfig", "default_magnitudes", "group_key", "load_results", "run_sweep"]
+__all__ = [
+    "FORMAT_NAME",
+    "MAGNITUDE_RESOLUTION_N",
+    "CellCounts",
+    "SweepConfig",
+    "default_magnitudes",
+    "group_key",
+    "load_results",
+    "run_sweep",
+]
 
 FORMAT_NAME = "gaitlib.benchmark"
 FORMAT_VERSION = 2  # 2: pushes from push_lead_s before the request until deadline_s after it
 _EPISODE_SECONDS = 1e6  # no time-outs: worlds are reset after each transition
+MAGNITUDE_RESOLUTION_N = 0.001
+"""Push magnitudes that round to the same multiple of this, N, are one cell (one key, one seed)."""
 
 
 def default_magnitudes() -> tuple[float, ...]:
@@ -52,7 +64,8 @@ def default_magnitudes() -> tuple[float, ...]:
 
 @dataclass(frozen=True, kw_only=True)
 class SweepConfig:
-    """What the sweep runs. Everything but ``num_worlds``, ``backend`` and ``device`` must match to resume."""
+    """What the sweep runs (checked when built: one-line errors). Everything but ``backend`` and ``device`` must match
+    to resume: the worlds' count decides which world draws which random numbers, so it changes the results."""
 
     strategies: tuple[str, ...] = ("random", "value", "tmt", "tmt-value", "net")
     """Strategy names (:func:`gaitlib.strategies.strategy_names`)."""
@@ -85,10 +98,33 @@ class SweepConfig:
     seed: int = 0
     """Base seed; each magnitude derives its own from it (the same for every strategy)."""
 
+    def __post_init__(self) -> None:
+        if self.samples < 1 or self.num_worlds < 1:
+            raise GaitlibError("samples and worlds must be positive")
+        if not self.strategies or not self.magnitudes:
+            raise GaitlibError("give at least one strategy and one magnitude")
+        if not all(math.isfinite(m) and m >= 0 for m in self.magnitudes):
+            raise GaitlibError("push magnitudes must be finite and not negative")
+        if len(set(self.strategies)) != len(self.strategies):
+            raise GaitlibError(f"a strategy is given twice in {', '.join(self.strategies)}; give each once")
+        keys = [group_key("", m) for m in self.magnitudes]
+        for i, key in enumerate(keys):
+            if key in keys[:i]:
+                raise GaitlibError(
+                    f"push magnitudes {self.magnitudes[keys.index(key)]!r} N and {self.magnitudes[i]!r} N are one "
+                    f"cell (magnitudes are resolved to {MAGNITUDE_RESOLUTION_N:g} N); give each once"
+                )
+        if not 0 <= self.push_lead_s < self.warmup_s:
+            raise GaitlibError("the push lead must lie in [0, warm-up time)")
+        if self.horizon_s < self.deadline_s:
+            raise GaitlibError(
+                "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
+            )
+
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat."""
         fixed = asdict(self)
-        for name in ("num_worlds", "backend", "device"):
+        for name in ("backend", "device"):
             fixed.pop(name)
         return json.loads(json.dumps(fixed))
 
@@ -110,8 +146,9 @@ class CellCounts:
 
 
 def group_key(strategy: str, magnitude: float) -> str:
-    """The key of a (strategy, magnitude) group in ``results.json``, e.g. ``net@300``."""
-    return f"{strategy}@{magnitude:g}"
+    """The key of a (strategy, magnitude) group in ``results.json``, e.g. ``net@300`` or ``net@12.5``: the magnitude
+    at :data:`MAGNITUDE_RESOLUTION_N`."""
+    return f"{strategy}@{magnitude:.3f}".rstrip("0").rstrip(".")
 
 
 def load_results(out: Path) -> dict:
@@ -123,8 +160,12 @@ def load_results(out: Path) -> dict:
         results = json.loads(path.read_text())
     except (OSError, ValueError) as error:
         raise GaitlibError(f"{path} is not readable benchmark results ({type(error).__name__})") from error
-    if results.get("format") != FORMAT_NAME or results.get("format_version") != FORMAT_VERSION:
+    if not isinstance(results, dict) or results.get("format") != FORMAT_NAME:
+        raise GaitlibError(f"{path} is not gaitlib benchmark results")
+    if results.get("format_version") != FORMAT_VERSION:
         raise GaitlibError(f"{path} is not gaitlib benchmark results of format version {FORMAT_VERSION}")
+    if not all(isinstance(results.get(key), dict) for key in ("settings", "library_identities", "groups")):
+        raise GaitlibError(f"{path} is damaged benchmark results (settings, identities or groups missing)")
     return results
 
 
@@ -146,9 +187,13 @@ def run_sweep(
     identities = setup.resources.library.identities(setup.gaits)
     results = load_results(out)
     if results:
-        if results["settings"] != settings or results["library_identities"] != identities:
+        if results["library_identities"] != identities:
+            raise GaitlibError(f"{out} holds a benchmark of other policies; use another --out or delete it")
+        saved = results["settings"]
+        differ = sorted(k for k in settings.keys() | saved.keys() if settings.get(k) != saved.get(k))
+        if differ:
             raise GaitlibError(
-                f"{out} holds a benchmark with other settings or policies; use another --out or delete it"
+                f"{out} holds a benchmark with other settings ({', '.join(differ)}); use another --out or delete it"
             )
     else:
         results = {
@@ -187,16 +232,6 @@ def run_sweep(
 
 
 def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
-    if cfg.samples < 1 or cfg.num_worlds < 1:
-        raise GaitlibError("samples and worlds must be positive")
-    if not cfg.strategies or not cfg.magnitudes:
-        raise GaitlibError("give at least one strategy and one magnitude")
-    if any(m < 0 for m in cfg.magnitudes):
-        raise GaitlibError("push magnitudes must not be negative")
-    if not 0 <= cfg.push_lead_s < cfg.warmup_s:
-        raise GaitlibError("the push lead must lie in [0, warm-up time)")
-    if cfg.horizon_s < cfg.deadline_s:
-        raise GaitlibError("the horizon must be at least the deadline, so that outcomes cover the disturbance window")
     if cfg.pairs is None:
         return list(itertools.permutations(setup.gaits, 2))
     for m, n in cfg.pairs:

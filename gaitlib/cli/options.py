@@ -1,19 +1,180 @@
-"""Parsing of option values shared by several commands."""
+"""Checking and parsing of option values shared by the commands.
+
+Every numeric option is declared with :func:`bounded`, which states its range in the help and refuses, while the
+command line is parsed (before any work starts and before any file is created), a value that is not finite, not
+whole where a count is asked, or out of range: one line ``gaitlib: error: --push-max must be a finite number in
+[0, 2000] N, got nan`` and exit code 2. Ranges are sanity bounds, far beyond any useful run; what a count of
+parallel worlds costs in memory is checked against the machine by :func:`check_worlds`.
+"""
 
 from __future__ import annotations
 
-__all__ = ["parse_pairs"]
+import math
+import os
+from dataclasses import dataclass
+
+import typer
+
+from gaitlib.errors import GaitlibError
+
+__all__ = [
+    "COUNT",
+    "EPISODE_SECONDS",
+    "MAX_MAGNITUDES",
+    "MEASURE_SECONDS",
+    "PUSH_N",
+    "SEED",
+    "WORLDS",
+    "WORLD_BYTES",
+    "Bounds",
+    "OptionError",
+    "bounded",
+    "check_worlds",
+    "parse_magnitudes",
+    "parse_pairs",
+]
+
+WORLD_BYTES = 1 << 20
+"""Host memory one MuJoCo world costs, bytes: measured 0.68 MiB per world (peak RSS of the A1 backend with its
+imitation environment, 2048 worlds against 256, stepped), rounded up to 1 MiB."""
+MAX_MAGNITUDES = 1000
+"""Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
+
+
+class OptionError(GaitlibError):
+    """An option value the command does not accept (exit code 2, like other usage errors)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Bounds:
+    """The values a numeric option accepts."""
+
+    low: float
+    """Smallest value (excluded when ``low_open``), in ``unit``."""
+    high: float
+    """Largest value, in ``unit``."""
+    unit: str = ""
+    """Unit of the value (SI, or min for training time; empty for counts)."""
+    whole: bool = False
+    """Only whole numbers (counts, seeds)."""
+    low_open: bool = False
+    """``low`` itself is refused (durations that must be positive)."""
+
+    def describe(self) -> str:
+        """The range as the help and the errors write it, e.g. ``[0, 2000] N`` or ``(0, 600] s``."""
+        text = f"{'(' if self.low_open else '['}{_number(self.low)}, {_number(self.high)}]"
+        return f"{text} {self.unit}" if self.unit else text
+
+    def check(self, option: str, value: float | None) -> float | None:
+        """``value`` if it lies in the range (``None`` passes: an unset optional option); else :class:`OptionError`."""
+        if value is None:
+            return None
+        number = float(value) if isinstance(value, float) or abs(value) < 1e300 else math.inf * (value > 0 or -1)
+        above = number > self.low if self.low_open else number >= self.low
+        if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
+            kind = "a whole number" if self.whole else "a finite number"
+            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {_number(number)}")
+        return value
+
+
+def _number(value: float) -> str:
+    """``2000``, ``4294967295``, ``0.5``, ``nan``: whole numbers written out, others as ``:g`` writes them."""
+    value = float(value)
+    return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+
+
+PUSH_N = Bounds(low=0, high=2000, unit="N")
+"""Push magnitudes: up to four times the largest push of the paper's sweep (500 N)."""
+SEED = Bounds(low=0, high=2**32 - 1, whole=True)
+"""Random seeds (numpy's seed sequences take non-negative 32-bit words)."""
+WORLDS = Bounds(low=1, high=65536, whole=True)
+"""Parallel worlds (and evaluation episodes, one world each); memory is checked by :func:`check_worlds`."""
+COUNT = Bounds(low=1, high=1e6, whole=True)
+"""Iterations, epochs, samples per benchmark cell, checkpoint spacing."""
+EPISODE_SECONDS = Bounds(low=0, high=600, unit="s", low_open=True)
+"""Simulated lengths of a run or an evaluation episode, s."""
+MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
+"""Wall-clock time of a speed measurement, s."""
+
+
+def bounded(default, *names: str, help: str, bounds: Bounds):
+    """A typer option ``names`` whose help ends with its range and whose value is checked by ``bounds`` at parse
+    time."""
+
+    def check(param: typer.CallbackParam, value):
+        return bounds.check(param.opts[0], value)
+
+    return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check)
+
+
+def check_worlds(option: str, worlds: int, *, backend: str) -> None:
+    """Refuse ``worlds`` parallel MuJoCo worlds when their estimated memory (:data:`WORLD_BYTES` each) exceeds what
+    the machine has available (other backends allocate on their device: only the range applies)."""
+    from gaitlib.sim import resolve_backend_name
+
+    if resolve_backend_name(backend) != "mujoco":
+        return
+    need, have = worlds * WORLD_BYTES, _available_bytes()
+    if need > have:
+        raise OptionError(
+            f"{option} {worlds} needs about {need / 2**30:.1f} GiB ({WORLD_BYTES / 2**20:g} MiB per MuJoCo world) "
+            f"but {have / 2**30:.1f} GiB is available; use fewer worlds"
+        )
+
+
+def _available_bytes() -> int:
+    """Memory available to a new allocation, bytes (``MemAvailable``; the physical memory where it is unknown)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
 def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ...] | None:
-    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it."""
+    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it. A text that
+    names no pair, or a pair with an empty side, is refused."""
     if text is None:
         return None
     pairs: list[tuple[str, str]] = []
     for item in (part.strip() for part in text.split(",") if part.strip()):
         if "-" in item:
-            m, n = item.split("-", 1)
+            m, n = (side.strip() for side in item.split("-", 1))
+            if not (m and n):
+                raise OptionError(f"--pairs '{text}': '{item}' is not a pair; give pairs like trot-stand")
             pairs.append((m, n))
         else:
             pairs += [(item, g) for g in gaits if g != item] + [(g, item) for g in gaits if g != item]
+    if not pairs:
+        raise OptionError(f"--pairs '{text}' names no pair; give pairs like trot-stand,pace-stand")
     return tuple(dict.fromkeys(pairs))
+
+
+def parse_magnitudes(text: str) -> tuple[float, ...]:
+    """``START:STOP:STEP`` (STOP included) or a comma-separated list -> push magnitudes, N, each in
+    :data:`PUSH_N`, at most :data:`MAX_MAGNITUDES` of them (counted before any list is built)."""
+    try:
+        if ":" in text:
+            start, stop, step = (float(v) for v in text.split(":"))
+            for value in (start, stop):
+                PUSH_N.check("--magnitudes", value)
+            if not (math.isfinite(step) and step > 0 and stop >= start):
+                raise ValueError
+            span = (stop - start) / step  # STOP included: span + 1 values (a tolerance of float rounding)
+            count = MAX_MAGNITUDES + 1 if span >= MAX_MAGNITUDES else math.floor(span + 1e-9) + 1
+            values: tuple[float, ...] = ()
+            if count <= MAX_MAGNITUDES:
+                values = tuple(round(start + i * step, 6) for i in range(count))
+        else:
+            values = tuple(float(v) for v in text.split(",") if v.strip())
+            count = len(values)
+    except ValueError:
+        raise OptionError(f"--magnitudes '{text}': give START:STOP:STEP (e.g. 0:500:50) or a list") from None
+    if not 1 <= count <= MAX_MAGNITUDES:
+        raise OptionError(f"--magnitudes '{text}': give 1 to {MAX_MAGNITUDES} values")
+    for value in values:
+        PUSH_N.check("--magnitudes", value)
+    return values

@@ -9,7 +9,8 @@ __all__ = ["job_progress"]
 
 
 def job_progress(console: Console, label: str) -> Progress:
-    """A bar with done/total, a ``status`` text field, elapsed time and ETA; tasks must set ``status``."""
+    """A bar with done/total, a ``status`` text field, elapsed time and ETA; tasks must set ``status``. Drawn on a
+    terminal only: a log gets the commands' own lines, so that a run refused while it sets up writes one line."""
     return Progress(
         TextColumn(f"[bold]{label}"),
         BarColumn(),
@@ -18,4 +19,5 @@ def job_progress(console: Console, label: str) -> Progress:
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=console,
+        disable=not console.is_terminal,
     )

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.options import COUNT, EPISODE_SECONDS, MAX_MAGNITUDES, PUSH_N, SEED, WORLDS, bounded
+
 __all__ = ["benchmark_command", "run_command"]
 
 
@@ -15,12 +17,15 @@ def run_command(
     source: str = typer.Option("trot", "--from", help="Gait the robot starts in."),
     dest: str = typer.Option("stand", "--to", help="Gait requested."),
     strategy: str = typer.Option("net", "--strategy", help="random, value, tmt, tmt-value or net."),
-    request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s."),
-    push: float = typer.Option(
-        0.0, "--push", help="Push magnitude, N (0: none); pushes from 0.6 s before the request until 2 s after it."
+    request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s, in [0, --seconds)."),
+    push: float = bounded(
+        0.0,
+        "--push",
+        help="Push magnitude (0: none); pushes from 0.6 s before the request until 2 s after it;",
+        bounds=PUSH_N,
     ),
-    seconds: float = typer.Option(6.0, "--seconds", help="Length of the run, s."),
-    seed: int = typer.Option(0, "--seed", help="Random seed (randomization, pushes, strategy)."),
+    seconds: float = bounded(6.0, "--seconds", help="Length of the run;", bounds=EPISODE_SECONDS),
+    seed: int = bounded(0, "--seed", help="Random seed (randomization, pushes, strategy);", bounds=SEED),
     plot: Path = typer.Option(Path("run.png"), "--plot", help="Where to write the plot (PNG)."),
     video: Path | None = typer.Option(None, "--video", help="Also render a video of the run (MP4)."),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
@@ -28,13 +33,15 @@ def run_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
     """Run one robot in --from, request --to, and let the meta-controller switch with --strategy."""
-    from gaitlib.errors import GaitlibError
+    from gaitlib.cli.options import OptionError
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
 
-    if not 0.0 <= request_at < seconds:
-        raise GaitlibError(f"--request-at must lie in [0, --seconds) = [0, {seconds:g})")
+    if not 0.0 <= request_at < seconds:  # NaN fails too
+        raise OptionError(
+            f"--request-at must be a finite number in [0, --seconds) = [0, {seconds:g}) s, got {request_at:g}"
+        )
     setup = load_switching(library)
     trace = run_episode(
         setup,
@@ -90,13 +97,18 @@ def benchmark_command(
     strategies: str = typer.Option(
         "random,value,tmt,tmt-value,net", "--strategies", help="Comma-separated strategies to compare."
     ),
-    magnitudes: str = typer.Option("0:500:50", "--magnitudes", help="Push magnitudes, N: START:STOP:STEP or a list."),
-    samples: int = typer.Option(100, "--samples", help="Transitions per (strategy, pair, magnitude) cell."),
+    magnitudes: str = typer.Option(
+        "0:500:50",
+        "--magnitudes",
+        help=f"Push magnitudes, N: START:STOP:STEP (STOP included) or a list; each in {PUSH_N.describe()}, "
+        f"at most {MAX_MAGNITUDES} distinct values.",
+    ),
+    samples: int = bounded(100, "--samples", help="Transitions per (strategy, pair, magnitude) cell;", bounds=COUNT),
     pairs: str | None = typer.Option(None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all)."),
     out: Path = typer.Option(Path("benchmark"), "--out", help="Output folder (resumed if it holds results)."),
-    worlds: int = typer.Option(256, "--worlds", help="Parallel worlds."),
+    worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (success per strategy, pair, N)."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
@@ -105,19 +117,21 @@ def benchmark_command(
 
     from gaitlib.benchmark.sweep import SweepConfig, run_sweep
     from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
-    from gaitlib.cli.options import parse_pairs
+    from gaitlib.cli.options import check_worlds, parse_magnitudes, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
+    check_worlds("--worlds", worlds, backend=backend)
+    swept = parse_magnitudes(magnitudes)
     setup = load_switching(library)
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
     config = SweepConfig(
         strategies=names,
-        magnitudes=_parse_magnitudes(magnitudes),
+        magnitudes=swept,
         samples=samples,
         pairs=parse_pairs(pairs, list(setup.gaits)),
         num_worlds=worlds,
@@ -125,14 +139,13 @@ def benchmark_command(
         seed=seed,
     )
     console = Console(stderr=True)
-    total = len(config.strategies) * len(config.magnitudes) * samples * len(config.pairs or _all_pairs(setup.gaits))
     with job_progress(console, "benchmark") as progress:
-        task = progress.add_task("benchmark", total=total, status="starting")
+        task = progress.add_task("benchmark", total=None, status="starting")
 
         last = [""]
 
         def show(group: str, done: int, total: int) -> None:
-            progress.update(task, completed=done, status=group)
+            progress.update(task, completed=done, total=total, status=group)
             if not console.is_terminal and group != last[0]:  # logs get a line per group
                 console.print(f"{done}/{total} transitions, now {group}")
                 last[0] = group
@@ -148,25 +161,6 @@ def benchmark_command(
         print(json.dumps({"success": success_table(rows), "summary": facts, "out": str(out)}))
         return
     _print_summary(facts, out, plot)
-
-
-def _parse_magnitudes(text: str) -> tuple[float, ...]:
-    from gaitlib.errors import GaitlibError
-
-    try:
-        if ":" in text:
-            start, stop, step = (float(v) for v in text.split(":"))
-            if step <= 0:
-                raise ValueError
-            count = int(round((stop - start) / step)) + 1
-            return tuple(round(start + i * step, 6) for i in range(count))
-        return tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise GaitlibError(f"--magnitudes '{text}': give START:STOP:STEP (e.g. 0:500:50) or a list") from None
-
-
-def _all_pairs(gaits: tuple[str, ...]) -> list[tuple[str, str]]:
-    return [(m, n) for m in gaits for n in gaits if m != n]
 
 
 def _print_summary(facts: dict, out: Path, plot: Path) -> None:

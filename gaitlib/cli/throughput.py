@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.options import MEASURE_SECONDS, PUSH_N, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
 __all__ = ["app"]
@@ -18,16 +19,23 @@ app = typer.Typer(help="Speed measurements (ratios against plain MuJoCo C measur
 @app.command("sim")
 def sim(
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
-    worlds: int = typer.Option(256, "--worlds", help="Number of parallel worlds."),
-    seconds: float = typer.Option(10.0, "--seconds", help="Wall-clock seconds spent on each side."),
-    threads: int = typer.Option(os.cpu_count() or 1, "--threads", help="CPU threads for the references."),
+    worlds: int = bounded(256, "--worlds", help="Number of parallel worlds;", bounds=WORLDS),
+    seconds: float = bounded(10.0, "--seconds", help="Wall-clock time spent on each side;", bounds=MEASURE_SECONDS),
+    threads: int = bounded(
+        os.cpu_count() or 1,
+        "--threads",
+        help="CPU threads for the references;",
+        bounds=Bounds(low=1, high=1024, whole=True),
+    ),
     device: str | None = typer.Option(None, "--device", help="Torch device for the backend (default: its own)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Control steps per second of a backend against plain MuJoCo C on the same in-contact worlds."""
+    from gaitlib.cli.options import check_worlds
     from gaitlib.throughput.sim import measure_throughput
     from gaitlib.sim import make_backend
 
+    check_worlds("--worlds", worlds, backend=backend)
     sim_backend = make_backend(backend, num_worlds=worlds, device=device)
     try:
         result = measure_throughput(sim_backend, seconds=seconds, threads=threads)
@@ -50,17 +58,21 @@ def sim(
 
 @app.command("collect")
 def collect_throughput(
-    worlds: int = typer.Option(256, "--worlds", help="Number of parallel worlds."),
-    seconds: float = typer.Option(60.0, "--seconds", help="Wall-clock seconds per measurement (three are made)."),
-    push_max: float = typer.Option(400.0, "--push-max", help="Largest push of the collection, N."),
+    worlds: int = bounded(256, "--worlds", help="Number of parallel worlds;", bounds=WORLDS),
+    seconds: float = bounded(
+        60.0, "--seconds", help="Wall-clock time per measurement (three are made);", bounds=MEASURE_SECONDS
+    ),
+    push_max: float = bounded(400.0, "--push-max", help="Largest push of the collection;", bounds=PUSH_N),
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Samples per second of gaitlib collect against what the environment step allows (goal: ratio >= 0.8)."""
+    from gaitlib.cli.options import check_worlds
     from gaitlib.throughput.collect import measure_collect_throughput
     from gaitlib.training import Library
 
+    check_worlds("--worlds", worlds, backend=backend)
     result = measure_collect_throughput(
         Library(library), worlds=worlds, seconds=seconds, push_max=push_max, backend=backend
     )

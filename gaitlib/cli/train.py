@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.options import COUNT, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
 __all__ = ["eval_command", "train_command"]
@@ -33,24 +34,35 @@ def train_command(
     preset: str = typer.Option(
         "cpu", "--preset", help="cpu (tuned for a 2-core CPU), paper (Table 2) or tiny (the tests': learns nothing)."
     ),
-    iterations: int | None = typer.Option(None, "--iterations", help="PPO iterations (default: the preset's)."),
-    minutes: float | None = typer.Option(None, "--minutes", help="Stop after this much training time, min."),
+    iterations: int | None = bounded(
+        None, "--iterations", help="PPO iterations (default: the preset's);", bounds=COUNT
+    ),
+    minutes: float | None = bounded(
+        None,
+        "--minutes",
+        help="Stop after this much training time (default: no limit);",
+        bounds=Bounds(low=0, high=1e5, unit="min", low_open=True),
+    ),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     gait_file: Path | None = typer.Option(None, "--gait-file", help="TOML gait description of a new gait."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
-    checkpoint_every: int = typer.Option(50, "--checkpoint-every", help="Iterations between checkpoints."),
-    eval_episodes: int = typer.Option(64, "--eval-episodes", help="Episodes of the final evaluation."),
+    checkpoint_every: int = bounded(50, "--checkpoint-every", help="Iterations between checkpoints;", bounds=COUNT),
+    eval_episodes: int = bounded(
+        64, "--eval-episodes", help="Episodes of the final evaluation (one world each);", bounds=WORLDS
+    ),
 ) -> None:
     """Train one gait policy with PPO and write it to the library (other gaits are never touched)."""
     from rich.console import Console
 
+    from gaitlib.cli.options import check_worlds
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir, get_preset
     from gaitlib.training.trainer import TrainRequest, train_gait
 
+    check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
     chosen = get_preset(preset)
     request = TrainRequest(
@@ -95,18 +107,20 @@ def train_command(
 
 def eval_command(
     gait: str = typer.Argument(..., help="Library entry to evaluate."),
-    episodes: int = typer.Option(256, "--episodes", help="Episodes (one world each)."),
-    seconds: float = typer.Option(20.0, "--seconds", help="Episode length, s."),
+    episodes: int = bounded(256, "--episodes", help="Episodes (one world each);", bounds=WORLDS),
+    seconds: float = bounded(20.0, "--seconds", help="Episode length;", bounds=EPISODE_SECONDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
-    push: float = typer.Option(0.0, "--push", help="Largest random push during the episodes, N (0: none)."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
+    push: float = bounded(0.0, "--push", help="Largest random push during the episodes (0: none);", bounds=PUSH_N),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Evaluate a library policy under paper Table 1 randomization: fall rate, tracking errors, episode length."""
+    from gaitlib.cli.options import check_worlds
     from gaitlib.training import Library
     from gaitlib.training.evaluate import evaluate_policy
 
+    check_worlds("--episodes", episodes, backend=backend)
     entry = Library(library).entry(gait)
     result = evaluate_policy(
         entry.policy,

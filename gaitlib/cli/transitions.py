@@ -7,32 +7,45 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.cli.options import COUNT, PUSH_N, SEED, WORLDS, Bounds, bounded
+
 __all__ = ["collect_command", "fit_command"]
 
 
 def collect_command(
-    samples: float = typer.Option(2e6, "--samples", help="Samples the file holds when done (2e6 is accepted)."),
+    samples: float = bounded(
+        2e6,
+        "--samples",
+        help="Samples the file holds when done (2e6 is accepted);",
+        bounds=Bounds(low=1, high=1e8, whole=True),
+    ),
     out: Path = typer.Option(Path("data/transitions.h5"), "--out", help="HDF5 file (resumed if it exists)."),
     gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
     pairs: str | None = typer.Option(
         None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it."
     ),
-    push_max: float = typer.Option(0.0, "--push-max", help="Largest random push, N (0: none)."),
-    horizon: float = typer.Option(2.0, "--horizon", help="Time after the switch that decides success, s."),
-    worlds: int = typer.Option(256, "--worlds", help="Parallel worlds."),
+    push_max: float = bounded(0.0, "--push-max", help="Largest random push (0: none);", bounds=PUSH_N),
+    horizon: float = bounded(
+        2.0,
+        "--horizon",
+        help="Time after the switch that decides success;",
+        bounds=Bounds(low=0, high=60, unit="s", low_open=True),
+    ),
+    worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
     """Collect policy-switch samples into HDF5: run m, switch to n at a random phase, label whether it stays up."""
     from rich.console import Console
     from rich.markup import escape
 
-    from gaitlib.cli.options import parse_pairs
+    from gaitlib.cli.options import check_worlds, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import Library
     from gaitlib.transitions import CollectConfig, collect
 
+    check_worlds("--worlds", worlds, backend=backend)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
     config = CollectConfig(
@@ -71,8 +84,8 @@ def fit_command(
         [Path("data/transitions.h5")], "--data", help="HDF5 transition samples; repeat to fit on several files."
     ),
     input_kind: str = typer.Option("latent", "--input", help="latent, phase or explicit."),
-    epochs: int = typer.Option(100, "--epochs", help="Training epochs."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    epochs: int = bounded(100, "--epochs", help="Training epochs;", bounds=COUNT),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     ablation: bool = typer.Option(False, "--ablation", help="Fit all three inputs and compare with the paper."),
     evaluate: bool = typer.Option(False, "--evaluate", help="Score the library's net on --data instead of fitting."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
