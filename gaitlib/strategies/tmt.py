@@ -170,7 +170,8 @@ def save_table(path: Path, table: TransitionTable) -> Path:
 
 def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:
     """Read the TMT at ``path`` for the current library (gait name -> identity); one-line errors when it is
-    missing, foreign, of another version, or built for other policies."""
+    missing, foreign, of another version, damaged (missing keys, tables of the wrong shape), or built for other
+    policies."""
     path = Path(path)
     if not path.is_file():
         raise TransitionDataError(f"no TMT at {path} (run gaitlib fit)")
@@ -184,23 +185,54 @@ def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:
         raise TransitionDataError(
             f"TMT {path} has format version {payload.get('format_version')}; this gaitlib reads {FORMAT_VERSION}"
         )
-    check_identities(payload["library_identities"], identities, what=f"TMT {path}")
-    gaits = tuple(payload["gaits"])
+    try:
+        table = _from_payload(payload)
+    except (KeyError, TypeError, ValueError, AttributeError) as error:
+        what = f"missing {error}" if isinstance(error, KeyError) else str(error).splitlines()[0]
+        raise TransitionDataError(f"TMT {path} is damaged ({what}); run gaitlib fit") from error
+    check_identities(table.identities, identities, what=f"TMT {path}")
+    return table
+
+
+def _from_payload(payload: dict) -> TransitionTable:
+    """The table a ``tmt.json`` payload describes; ``KeyError``/``ValueError``/``TypeError`` where keys are missing,
+    tables have the wrong shapes, or a calibrated strategy lacks its thresholds."""
+    gaits = tuple(str(name) for name in payload["gaits"])
+    identities = {str(k): str(v) for k, v in payload["library_identities"].items()}
+    if set(identities) != set(gaits):
+        raise ValueError(f"identities of {sorted(identities)} for gaits {list(gaits)}")
+    successes, counts = (_array(payload, key, np.int64) for key in ("successes", "counts"))
+    typical_value = _array(payload, "typical_value", np.float64)
+    g = len(gaits)
+    if successes.ndim != 4 or successes.shape[:2] != (g, g) or successes.shape[2] != successes.shape[3]:
+        raise ValueError(f"a table of shape {successes.shape} for {g} gaits")
+    if counts.shape != successes.shape or typical_value.shape != (g,):
+        raise ValueError(f"counts {counts.shape} and typical values {typical_value.shape} for tables {successes.shape}")
     index = {name: i for i, name in enumerate(gaits)}
 
     def pair(text: str) -> tuple[int, int]:
-        m, n = text.split("-", 1)
+        m, _, n = text.partition("-")
+        if m not in index or n not in index:
+            raise ValueError(f"thresholds of pair '{text}', not of its gaits")
         return index[m], index[n]
 
+    thresholds = {name: {pair(p): float(t) for p, t in payload["thresholds"][name].items()} for name in CALIBRATED}
     return TransitionTable(
         gaits=gaits,
-        identities=payload["library_identities"],
-        successes=np.asarray(payload["successes"], dtype=np.int64),
-        counts=np.asarray(payload["counts"], dtype=np.int64),
-        typical_value=np.asarray(payload["typical_value"], dtype=np.float64),
-        thresholds={name: {pair(p): float(t) for p, t in per.items()} for name, per in payload["thresholds"].items()},
-        info=payload["info"],
+        identities=identities,
+        successes=successes,
+        counts=counts,
+        typical_value=typical_value,
+        thresholds=thresholds,
+        info=dict(payload["info"]),
     )
+
+
+def _array(payload: dict, key: str, dtype) -> np.ndarray:
+    try:
+        return np.asarray(payload[key], dtype=dtype)
+    except ValueError:  # ragged nested lists, or entries that are not numbers
+        raise ValueError(f"'{key}' is not a table of numbers") from None
 
 
 class TMTStrategy(Strategy):

@@ -188,21 +188,24 @@ class GaitRunner(OnPolicyRunner):
         self.save(str(self.checkpoints / name), record)
 
     def resume(self) -> None:
-        """Continue from ``checkpoints/latest.pt``; a checkpoint of another gait or preset is refused."""
+        """Continue from ``checkpoints/latest.pt``; a missing, damaged or foreign checkpoint, or one of another gait
+        or preset, is refused in one line."""
         latest = self.checkpoints / "latest.pt"
-        if not latest.is_file():
-            raise GaitlibError(f"nothing to resume: no checkpoint at {latest}")
-        saved = torch.load(latest, map_location=self.device, weights_only=False)
-        record = saved.get("infos")
-        if not isinstance(record, dict):
-            raise GaitlibError(f"checkpoint {latest} has no gaitlib run record (an older layout): train afresh")
+        saved = _read_checkpoint(latest, device=self.device)
+        record = saved["infos"]
         gait, preset = self.request.description.name, self.request.preset.name
         if (record["gait"], record["preset"]) != (gait, preset):
             raise GaitlibError(
                 f"checkpoint {latest} is for gait '{record['gait']}' with preset '{record['preset']}', "
                 f"not '{gait}' with '{preset}'"
             )
-        self.alg.load(saved, None, strict=True)
+        try:
+            self.alg.load(saved, None, strict=True)
+        except (KeyError, RuntimeError, TypeError, ValueError) as error:
+            raise GaitlibError(
+                f"checkpoint {latest} does not fit the preset's networks ({str(error).splitlines()[0][:120]}); "
+                "train afresh without --resume"
+            ) from error
         self.current_learning_iteration = saved["iter"]
         self.samples, self.elapsed, self.curve = record["samples"], record["elapsed_s"], record["curve"]
 
@@ -322,6 +325,32 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
         wall_clock_s=runner.elapsed,
         evaluation=evaluation,
     )
+
+
+_RECORD = {"gait": str, "preset": str, "samples": int, "elapsed_s": (int, float), "curve": list}
+"""The run record a gaitlib checkpoint keeps in ``infos``: key -> type."""
+
+
+def _read_checkpoint(path: Path, *, device: str) -> dict:
+    """The checkpoint at ``path`` (tensors and plain data only: ``weights_only``), with a complete run record; a
+    one-line :class:`GaitlibError` for a missing, truncated or foreign file."""
+    if not path.is_file():
+        raise GaitlibError(f"nothing to resume: no checkpoint at {path}")
+    try:
+        saved = torch.load(path, map_location=device, weights_only=True)
+    except Exception as error:  # torch raises several unrelated types for a truncated or foreign file
+        raise GaitlibError(
+            f"checkpoint {path} is unreadable (truncated, or not a plain torch checkpoint); "
+            "train afresh without --resume"
+        ) from error
+    record = saved.get("infos") if isinstance(saved, dict) else None
+    complete = isinstance(record, dict) and all(isinstance(record.get(k), t) for k, t in _RECORD.items())
+    if not (complete and isinstance(saved.get("iter"), int)):
+        raise GaitlibError(
+            f"checkpoint {path} is not a gaitlib training checkpoint (no complete run record); "
+            "train afresh without --resume"
+        )
+    return saved
 
 
 def _thin_curve(rows: list[list], *, most: int = _CURVE_ROWS) -> list[list]:

@@ -82,7 +82,8 @@ def save_net(path: Path, result: FitResult) -> Path:
 
 
 def read_metadata(path: Path) -> dict:
-    """The metadata of the transition-net at ``path`` (format and version checked, identities not)."""
+    """The metadata of the transition-net at ``path`` (format, version and the presence of an identity per gait
+    checked; the identities themselves not)."""
     return _read(Path(path))["metadata"]
 
 
@@ -121,4 +122,7 @@ def _read(path: Path) -> dict:
             f"transition-net {path} has format version {metadata.get('format_version')}; "
             f"this gaitlib reads version {FORMAT_VERSION}"
         )
+    gaits, identities = metadata.get("gaits"), metadata.get("library_identities")
+    if not (isinstance(gaits, list) and isinstance(identities, dict) and set(identities) == set(gaits)):
+        raise TransitionDataError(f"transition-net {path} is damaged: no library identity for each of its gaits")
     return saved
