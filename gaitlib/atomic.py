@@ -1,17 +1,28 @@
 """Atomic file writes: the one way gaitlib writes a result file, so that a crash, Ctrl-C or a full disk never
-leaves a half-written file where a good one (or none) was."""
+leaves a half-written file where a good one (or none) was; and the one writer lock, so that two processes never
+write the same result."""
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import glob
 import json
 import os
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "fsync_folder", "save_figure", "stale_temporaries", "write_json"]
+__all__ = [
+    "atomic_path",
+    "fsync_folder",
+    "release_lock",
+    "save_figure",
+    "stale_temporaries",
+    "take_lock",
+    "write_json",
+]
 
 
 def _umask() -> int:
@@ -82,3 +93,42 @@ def save_figure(fig, path: Path, *, dpi: int = 110) -> Path:
     finally:
         plt.close(fig)
     return Path(path)
+
+
+def take_lock(lock: Path, *, writing: str, error: type[Exception]) -> int:
+    """Take the exclusive writer lock ``lock`` (a file, created if needed) without waiting, write this process's
+    id into it and return its descriptor; if another process holds it, raise ``error("<writing> is being written
+    by process N")``. The kernel releases the lock when the holder exits, however it exits."""
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _holder(fd)
+            os.close(fd)
+            raise error(f"{writing} is being written by {holder}") from None
+        with contextlib.suppress(FileNotFoundError):
+            if os.path.samestat(os.fstat(fd), os.stat(lock)):
+                break
+        os.close(fd)  # its last holder removed it after we opened it: take the one there now
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    return fd
+
+
+def release_lock(lock: Path, fd: int) -> None:
+    """Release a lock taken with :func:`take_lock` (the lock file is removed)."""
+    lock.unlink(missing_ok=True)
+    os.close(fd)
+
+
+def _holder(fd: int) -> str:
+    """Who holds the lock open as ``fd`` (it writes its id right after taking it)."""
+    for _ in range(20):
+        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
+        if text.isdigit():
+            return f"process {text}"
+        time.sleep(0.05)
+    return "another process"
+

@@ -14,13 +14,15 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
-import fcntl
 import os
 import shutil
 import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+
+from gaitlib.atomic import fsync_folder, release_lock, take_lock
+from gaitlib.errors import GaitlibError
 
 __all__ = ["exchange", "recover", "staged_folder"]
 
@@ -84,23 +86,17 @@ def _swap_in(staging: Path, final: Path) -> None:
         os.rename(final, old)
         os.rename(staging, final)
         shutil.rmtree(old)
-    _fsync(final.parent)
+    fsync_folder(final.parent)
 
 
 @contextlib.contextmanager
 def _writer_lock(final: Path) -> Iterator[None]:
-    from gaitlib.errors import GaitlibError
-
-    with open(final.with_name(f".{final.name}.lock"), "a+") as handle:
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.seek(0)
-            raise GaitlibError(f"{final} is being written by process {handle.read().strip() or '?'}") from None
-        handle.truncate(0)
-        handle.write(str(os.getpid()))
-        handle.flush()
+    lock = final.with_name(f".{final.name}.lock")
+    fd = take_lock(lock, writing=str(final), error=GaitlibError)
+    try:
         yield
+    finally:
+        release_lock(lock, fd)
 
 
 def _fsync_tree(folder: Path) -> None:
@@ -108,13 +104,9 @@ def _fsync_tree(folder: Path) -> None:
     process, then also leaves the old or the new version)."""
     for path in folder.iterdir():
         if path.is_file():
-            _fsync(path)
-    _fsync(folder)
-
-
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+            fd = os.open(path, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+    fsync_folder(folder)

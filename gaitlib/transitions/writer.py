@@ -13,12 +13,9 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import fcntl
 import json
-import os
 import signal
 import threading
-import time
 from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
@@ -27,7 +24,7 @@ import h5py
 import numpy as np
 
 import gaitlib
-from gaitlib.atomic import stale_temporaries
+from gaitlib.atomic import release_lock, stale_temporaries, take_lock
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions import schema
 from gaitlib.transitions.explicit import EXPLICIT_DIM
@@ -187,39 +184,12 @@ def _clean(path: Path, index: schema.TransitionIndex) -> str | None:
 
 
 def _lock(path: Path) -> int:
-    """Take the exclusive lock of ``path`` (without waiting) and write this process's id into it."""
-    lock = lock_path(path)
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = _holder(fd)
-            os.close(fd)
-            raise TransitionDataError(f"{path} is being written by {holder}") from None
-        with contextlib.suppress(FileNotFoundError):
-            if os.path.samestat(os.fstat(fd), os.stat(lock)):
-                break
-        os.close(fd)  # its last holder removed it after we opened it: take the one there now
-    os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
-    return fd
-
-
-def _holder(fd: int) -> str:
-    """Who holds the lock open as ``fd`` (it writes its id right after taking it)."""
-    for _ in range(20):
-        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
-        if text.isdigit():
-            return f"process {text}"
-        time.sleep(0.05)
-    return "another process"
+    """Take the exclusive lock of ``path`` (without waiting); one line naming the holder if it is taken."""
+    return take_lock(lock_path(path), writing=str(path), error=TransitionDataError)
 
 
 def _unlock(path: Path, fd: int) -> None:
-    lock_path(path).unlink(missing_ok=True)
-    os.close(fd)
+    release_lock(lock_path(path), fd)
 
 
 @contextlib.contextmanager
