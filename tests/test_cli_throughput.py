@@ -33,7 +33,7 @@ def test_unknown_backend_is_one_error_line() -> None:
 def test_zero_worlds_is_one_error_line() -> None:
     result = gaitlib_quick("throughput", "sim", "--worlds", "0")
     assert result.returncode == 2
-    assert result.stderr.strip() == "gaitlib: error: need at least one world, got 0"
+    assert result.stderr.strip() == "gaitlib: error: --worlds must be a whole number in [1, 65536], got 0"
 
 
 def test_help_lists_only_working_commands() -> None:
