@@ -19,7 +19,11 @@ def collect_command(
         help="Samples the file holds when done (2e6 is accepted);",
         bounds=Bounds(low=1, high=1e8, whole=True),
     ),
-    out: Path = typer.Option(Path("data/transitions.h5"), "--out", help="HDF5 file (resumed if it exists)."),
+    out: Path = typer.Option(
+        Path("data/transitions.h5"),
+        "--out",
+        help="Transition file: a small HDF5 index, its samples in OUT.parts/ (resumed if it exists).",
+    ),
     gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
     pairs: str | None = typer.Option(
         None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it."
