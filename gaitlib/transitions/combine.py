@@ -2,8 +2,8 @@
 
 Files may hold different gaits (a collection made after a gait was added holds the new pairs); gait indices are
 remapped onto the canonical order of the union of their gaits (:func:`~gaitlib.training.library.gait_order`), the
-order the transition-net and the TMT index gaits by, whatever order a file was written in. Files must agree on every gait
-they share (same library identity: the same policy) and on the latent size.
+order the transition-net and the TMT index gaits by, whatever order a file was written in. Files must agree on every
+gait they share (same library identity: the same policy) and on the latent size.
 """
 
 from __future__ import annotations
