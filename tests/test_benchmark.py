@@ -8,7 +8,6 @@ import json
 
 import pytest
 
-from gaitlib.benchmark.sweep import SweepConfig, load_results, run_sweep
 from gaitlib.benchmark.report import (
     CellResult,
     cell_results,
@@ -18,6 +17,7 @@ from gaitlib.benchmark.report import (
     write_csv,
     write_plot,
 )
+from gaitlib.benchmark.sweep import SweepConfig, load_results, run_sweep
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import load_switching
 

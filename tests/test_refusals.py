@@ -9,8 +9,8 @@ import shutil
 
 import pytest
 import torch
-
 from cli_runner import gaitlib_quick
+
 from gaitlib.training import Library, default_library_dir
 
 

@@ -12,6 +12,7 @@ from gaitlib.gaits import get_gait
 from gaitlib.training import Library, LibraryError, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 
+
 def request(tmp_path, gait="stand", **kw) -> TrainRequest:
     base = dict(
         description=get_gait(gait),

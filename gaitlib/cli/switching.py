@@ -115,8 +115,8 @@ def benchmark_command(
     """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot."""
     from rich.console import Console
 
-    from gaitlib.benchmark.sweep import SweepConfig, run_sweep
     from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
+    from gaitlib.benchmark.sweep import SweepConfig, run_sweep
     from gaitlib.cli.options import check_worlds, parse_magnitudes, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.errors import GaitlibError

@@ -32,8 +32,8 @@ def sim(
 ) -> None:
     """Control steps per second of a backend against plain MuJoCo C on the same in-contact worlds."""
     from gaitlib.cli.options import check_worlds
-    from gaitlib.throughput.sim import measure_throughput
     from gaitlib.sim import make_backend
+    from gaitlib.throughput.sim import measure_throughput
 
     check_worlds("--worlds", worlds, backend=backend)
     sim_backend = make_backend(backend, num_worlds=worlds, device=device)

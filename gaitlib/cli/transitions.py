@@ -119,7 +119,6 @@ def _report(report: dict, as_json: bool) -> None:
     from rich.table import Table
 
     from gaitlib.cli.tables import table_console
-
     from gaitlib.strategies.fitting import PAPER_PAIRS, PAPER_TABLE_3
 
     rows = report.get("balanced_validation_accuracy") or {"library net": report["accuracy"]}
