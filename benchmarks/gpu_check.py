@@ -1,0 +1,366 @@
+"""GPU check: the ``newton`` backend's speed against raw mujoco_warp, parity with MuJoCo C, training and collection.
+
+Prints one JSON line per measurement on stdout (everything else, Warp's and MuJoCo's own output included, goes to
+stderr); a measurement that fails prints a line with an ``"error"`` and the check goes on to the next one. The exit
+status is 1 when any line has an error or parity failed. Sized for one H100 in under 8 minutes, Warp's kernel
+compilation on a fresh machine included; ``--tiny`` runs every measurement on the CPU at a few worlds in about half
+a minute (what CI runs).
+
+    python benchmarks/gpu_check.py            # on a CUDA machine
+    python benchmarks/gpu_check.py --tiny     # on the CPU
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import torch
+
+__all__ = [
+    "FULL",
+    "PARITY_LIMITS",
+    "TINY",
+    "CheckSizes",
+    "main",
+    "measure_collect",
+    "measure_parity",
+    "measure_sim",
+    "measure_train",
+]
+
+_REPO = str(Path(__file__).resolve().parents[1])
+"""The repository root (for ``tests.test_sim_parity``)."""
+
+PARITY_LIMITS = {"root_pos": 2e-3, "root_quat": 5e-3, "joint_pos": 1e-2, "foot_pos": 2e-3}
+"""Largest difference newton - MuJoCo C over 1 s of stepping that passes (m, quaternion units, rad, m); the limits
+of ``tests/test_sim_parity.py``."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class CheckSizes:
+    """Sizes and durations of one check."""
+
+    device: str
+    """Torch device of the ``newton`` backend everywhere (``cuda:0`` or ``cpu``)."""
+    sim_worlds: tuple[int, ...]
+    """World counts of the newton-against-raw-mujoco_warp measurement."""
+    sim_seconds: float
+    """Wall-clock time given to each side (backend, each raw reference) of that measurement, s."""
+    jobs_backend: str
+    """Backend of the training and collection measurements."""
+    train_preset: str
+    """Training preset of ``gaitlib train trot``."""
+    train_seconds: float
+    """Training time limit (training stops after the iteration that passes it), s."""
+    eval_episodes: int
+    """Episodes of the evaluation that ends the training run."""
+    eval_seconds: float
+    """Length of those episodes, s."""
+    collect_worlds: int
+    """Worlds of the collection measurement."""
+    collect_seconds: float
+    """Wall-clock time of each of its three parts (reference rollout, collection, reference rollout), s."""
+    push_max: float
+    """Largest push of the collection, N."""
+
+
+FULL = CheckSizes(
+    device="cuda:0",
+    sim_worlds=(1024, 4096),
+    sim_seconds=5.0,
+    jobs_backend="newton",
+    train_preset="paper",
+    train_seconds=90.0,
+    eval_episodes=64,
+    eval_seconds=5.0,
+    collect_worlds=4096,
+    collect_seconds=15.0,
+    push_max=400.0,
+)
+"""One H100, under 8 minutes."""
+
+TINY = CheckSizes(
+    device="cpu",
+    sim_worlds=(8, 16),
+    sim_seconds=0.5,
+    jobs_backend="mujoco",
+    train_preset="tiny",
+    train_seconds=1.0,
+    eval_episodes=2,
+    eval_seconds=0.5,
+    collect_worlds=8,
+    collect_seconds=1.5,
+    push_max=400.0,
+)
+"""The CPU in CI: every measurement, a few worlds, a second or two each."""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tiny", action="store_true", help="run on the CPU at a few worlds (CI)")
+    args = parser.parse_args()
+    sizes = TINY if args.tiny else FULL
+    out = _take_stdout()
+    jobs: list[tuple[str, int | None, Callable[[], dict[str, object]]]] = [
+        ("sim", n, lambda n=n: measure_sim(sizes, worlds=n)) for n in sizes.sim_worlds
+    ]
+    jobs += [
+        ("parity", 2, lambda: measure_parity(sizes)),
+        ("train", None, lambda: measure_train(sizes)),  # its worlds come with its figures
+        ("collect", sizes.collect_worlds, lambda: measure_collect(sizes)),
+    ]
+    failed = False
+    for measure, worlds, job in jobs:
+        line = _run_one(measure, worlds, job, sizes)
+        failed |= "error" in line or line.get("passed") is False
+        out.write(json.dumps(line) + "\n")
+        out.flush()
+    sys.exit(1 if failed else 0)
+
+
+def _take_stdout() -> TextIO:
+    """A private handle on the real stdout; file descriptor 1 (and ``sys.stdout``) then lead to stderr, so that
+    lines printed by Warp, MuJoCo or rsl-rl, from Python or C, cannot mix into the JSON lines."""
+    sys.stdout.flush()
+    out = os.fdopen(os.dup(1), "w")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    return out
+
+
+def _run_one(
+    measure: str, worlds: int | None, job: Callable[[], dict[str, object]], sizes: CheckSizes
+) -> dict[str, object]:
+    """Run one measurement: its line, or a line with the error's first line (``worlds``: None where the
+    measurement's own figures give it)."""
+    print(f"gpu_check: {measure}, {worlds or 'preset'} worlds ...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    head: dict[str, object] = {"measure": measure, "device": _device_name(sizes.device), "worlds": worlds}
+    try:
+        _require_device(sizes.device)
+        values = job()
+    except Exception as error:  # noqa: BLE001 - one failed measurement must not stop the others
+        traceback.print_exc(file=sys.stderr)
+        message = (str(error).splitlines() or [""])[0]
+        values = {"error": f"{type(error).__name__}: {message}"}
+    return {**head, **values, "seconds": round(time.perf_counter() - start, 2)}
+
+
+def _device_name(device: str) -> str:
+    return torch.cuda.get_device_name(device) if device.startswith("cuda") and torch.cuda.is_available() else "cpu"
+
+
+def _require_device(device: str) -> None:
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise RuntimeError("CUDA is not available here; on the CPU run with --tiny")
+
+
+# ------------------------------------------------------------------------------------------------- measurements
+def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
+    """Control steps/s of the newton backend and of raw mujoco_warp stepping of its own model and data.
+
+    The raw side advances the backend's mujoco_warp model and data from the same settled standing state, with the
+    same substeps and controls, and no Newton or gaitlib work: eagerly, and as one captured Warp graph per control
+    step (a CUDA graph on the GPU); the faster is the reference. Every side waits for the device once per control
+    step. Newton writes its own state into that data at the start of each of its steps, so the raw steps in
+    between do not change what the backend steps; the sides are timed in alternating rounds
+    (:mod:`gaitlib.throughput.sim`)."""
+    from gaitlib.sim import make_backend
+    from gaitlib.throughput.sim import _rates, _settle
+
+    start = time.perf_counter()
+    backend = make_backend("newton", num_worlds=worlds, device=sizes.device)
+    build_s = time.perf_counter() - start
+    try:
+        targets = torch.tensor(backend.robot.default_joint_pos, device=backend.device).repeat(worlds, 1)
+        start = time.perf_counter()
+        _settle(backend, targets)  # 1 s of simulated time; on a fresh machine, also Warp's compilation of the step
+        settle_s = time.perf_counter() - start
+
+        def run_backend() -> None:
+            backend.set_pd_targets(targets)
+            backend.step()
+            backend.state()
+
+        references = _mujoco_warp_references(backend)
+        rate = _rates({"env": run_backend, **references}, worlds=worlds, seconds=sizes.sim_seconds, rounds=4)
+    finally:
+        backend.close()
+    raw = max(rate[key] for key in references)
+    return {
+        "backend": "newton",
+        "substeps": backend.robot.substeps,
+        "build_s": round(build_s, 2),
+        "settle_s": round(settle_s, 2),
+        "env_steps_per_s": round(rate["env"]),
+        "raw_eager_steps_per_s": round(rate["raw_eager"]),
+        "raw_graph_steps_per_s": round(rate["raw_graph"]),
+        "raw_steps_per_s": round(raw),
+        "ratio": round(rate["env"] / raw, 3),
+    }
+
+
+def _mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
+    """One control step (``substeps`` calls of ``mujoco_warp.step``) of every world on the backend's own
+    mujoco_warp model and data: eagerly, and as a captured Warp graph."""
+    import mujoco_warp
+    import warp as wp
+
+    # NewtonBackend has no public accessor for these (yet): its solver, Warp device and stream scope.
+    solver, device, scope = backend._solver, backend._wp_device, backend._scope
+    model, data, substeps = solver.mjw_model, solver.mjw_data, backend.robot.substeps
+
+    def eager() -> None:
+        with scope():
+            for _ in range(substeps):
+                mujoco_warp.step(model, data)
+        wp.synchronize_device(device)
+
+    eager()  # makes and loads mujoco_warp's lazily created kernels before the capture
+    # On CUDA, captured and launched on Warp's own stream of the device (torch's default stream cannot be captured);
+    # every runner waits for the whole device at its end, so the two streams never overlap.
+    with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
+        for _ in range(substeps):
+            mujoco_warp.step(model, data)
+    graph = capture.graph
+
+    def graphed() -> None:
+        wp.capture_launch(graph)
+        wp.synchronize_device(device)
+
+    return {"raw_eager": eager, "raw_graph": graphed}
+
+
+def measure_parity(sizes: CheckSizes) -> dict[str, object]:
+    """The scenario of ``tests/test_sim_parity.py`` with the newton backend on ``sizes.device``: two worlds
+    stepping (and, in a second run, falling and pushed) for 1 s next to the MuJoCo C backend."""
+    cases = {
+        name: _parity_case(sizes.device, airborne=name == "falling-pushed") for name in ("ground", "falling-pushed")
+    }
+    worst = {name: max(case[name] for case in cases.values()) for name in PARITY_LIMITS}
+    failed = [name for name, case in cases.items() if not case["passed"]]
+    return {
+        "passed": not failed,
+        "failed_cases": failed,
+        "max_root_pos_diff_m": worst["root_pos"],
+        "max_root_quat_diff": worst["root_quat"],
+        "max_joint_pos_diff_rad": worst["joint_pos"],
+        "max_foot_pos_diff_m": worst["foot_pos"],
+        "foot_contact_mismatches": cases["ground"]["foot_contact_mismatches"],
+    }
+
+
+def _parity_case(device: str, *, airborne: bool) -> dict[str, object]:
+    from gaitlib.sim import make_backend, standing_state
+
+    if _REPO not in sys.path:
+        sys.path.insert(0, _REPO)
+    from tests.test_sim_parity import stepping_targets  # the test's motion, so that both check the same thing
+
+    n = 2
+    backends = [make_backend("mujoco", num_worlds=n), make_backend("newton", num_worlds=n, device=device)]
+    try:
+        start = standing_state(backends[0].robot, n)
+        if airborne:
+            start.root_pos[:, 2] = 1.0
+        for backend in backends:
+            backend.reset(torch.arange(n), start)
+            if airborne:
+                backend.set_trunk_force(torch.tensor([0]), torch.tensor([[0.0, 50.0, 0.0]]))
+        worst, mismatches, diverged = dict.fromkeys(PARITY_LIMITS, 0.0), 0, False
+        for k in range(30):  # 1 s at 30 Hz
+            states = []
+            for backend in backends:
+                backend.set_pd_targets(stepping_targets(k / 30, n))
+                diverged |= bool(backend.step().any())
+                states.append(backend.state())
+            c, w = (_on_cpu(state) for state in states)
+            for name in worst:
+                worst[name] = max(worst[name], (getattr(c, name) - getattr(w, name)).abs().max().item())
+            mismatches += int(not airborne and k >= 2 and not torch.equal(c.foot_contact, w.foot_contact))
+    finally:
+        for backend in backends:
+            backend.close()
+    passed = not diverged and mismatches == 0 and all(worst[name] < limit for name, limit in PARITY_LIMITS.items())
+    return {**worst, "foot_contact_mismatches": mismatches, "passed": passed}
+
+
+def _on_cpu(state):
+    return type(state)(**{name: value.cpu() for name, value in vars(state).items()})
+
+
+def measure_train(sizes: CheckSizes) -> dict[str, object]:
+    """``gaitlib train trot --preset <preset>`` for ``sizes.train_seconds`` into a temporary library and run
+    folder."""
+    from gaitlib.gaits import get_gait
+    from gaitlib.training import get_preset
+    from gaitlib.training.trainer import TrainRequest, train_gait
+
+    last: dict[str, float] = {}
+
+    def on_iteration(stats) -> None:
+        last["samples_per_s"] = stats.samples_per_s
+        print(f"gpu_check: train iteration {stats.iteration}, {stats.samples_per_s:,.0f} samples/s", file=sys.stderr)
+
+    preset = get_preset(sizes.train_preset)
+    with tempfile.TemporaryDirectory() as scratch:
+        request = TrainRequest(
+            description=get_gait("trot"),
+            preset=preset,
+            iterations=10**6,
+            time_limit_s=sizes.train_seconds,
+            library=Path(scratch) / "library",
+            run_dir=Path(scratch) / "run",
+            backend=sizes.jobs_backend,
+            eval_episodes=sizes.eval_episodes,
+            eval_seconds=sizes.eval_seconds,
+        )
+        result = train_gait(request, on_iteration=on_iteration)
+    return {
+        "worlds": preset.num_envs,
+        "backend": sizes.jobs_backend,
+        "preset": sizes.train_preset,
+        "iterations": result.iterations,
+        "samples": result.samples,
+        "train_s": round(result.wall_clock_s, 2),
+        "samples_per_s": round(result.samples / result.wall_clock_s),
+        "last_iteration_samples_per_s": round(last["samples_per_s"]),
+        "eval_fall_rate": round(result.evaluation.fall_rate, 3),
+    }
+
+
+def measure_collect(sizes: CheckSizes) -> dict[str, object]:
+    """``gaitlib throughput collect``: samples/s of a collection (into a temporary file) from the shipped library,
+    against what a plain policy rollout allows."""
+    from gaitlib.throughput.collect import measure_collect_throughput
+    from gaitlib.training import Library
+
+    result = measure_collect_throughput(
+        Library(None),
+        worlds=sizes.collect_worlds,
+        seconds=sizes.collect_seconds,
+        push_max=sizes.push_max,
+        backend=sizes.jobs_backend,
+    )
+    return {
+        "backend": sizes.jobs_backend,
+        "push_max": result.push_max,
+        "samples_per_s": round(result.samples_per_s, 1),
+        "env_steps_per_s": round(result.env_steps_per_s),
+        "steps_per_sample": round(result.steps_per_sample, 1),
+        "ratio": round(result.ratio, 3),
+    }
+
+
+if __name__ == "__main__":
+    main()
