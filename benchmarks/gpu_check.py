@@ -204,7 +204,7 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
         "settle_s": round(settle_s, 2),
         "env_steps_per_s": round(rate["env"]),
         "raw_eager_steps_per_s": round(rate["raw_eager"]),
-        "raw_graph_steps_per_s": round(rate["raw_graph"]),
+        "raw_graph_steps_per_s": round(rate["raw_graph"]) if "raw_graph" in rate else None,  # None: no capture
         "raw_steps_per_s": round(raw),
         "ratio": round(rate["env"] / raw, 3),
     }
@@ -212,7 +212,8 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
 
 def _mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
     """One control step (``substeps`` calls of ``mujoco_warp.step``) of every world on the backend's own
-    mujoco_warp model and data: eagerly, and as a captured Warp graph."""
+    mujoco_warp model and data: eagerly, and as a captured Warp graph (left out, with its traceback on stderr,
+    where the capture fails)."""
     import mujoco_warp
     import warp as wp
 
@@ -229,9 +230,13 @@ def _mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
     eager()  # makes and loads mujoco_warp's lazily created kernels before the capture
     # On CUDA, captured and launched on Warp's own stream of the device (torch's default stream cannot be captured);
     # every runner waits for the whole device at its end, so the two streams never overlap.
-    with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
-        for _ in range(substeps):
-            mujoco_warp.step(model, data)
+    try:
+        with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
+            for _ in range(substeps):
+                mujoco_warp.step(model, data)
+    except Exception:  # noqa: BLE001 - the eager reference still gives the measurement
+        traceback.print_exc(file=sys.stderr)
+        return {"raw_eager": eager}
     graph = capture.graph
 
     def graphed() -> None:
