@@ -28,7 +28,6 @@ import torch
 
 __all__ = [
     "FULL",
-    "PARITY_LIMITS",
     "TINY",
     "CheckSizes",
     "main",
@@ -37,14 +36,6 @@ __all__ = [
     "measure_sim",
     "measure_train",
 ]
-
-_REPO = str(Path(__file__).resolve().parents[1])
-"""The repository root (for ``tests.test_sim_parity``)."""
-
-PARITY_LIMITS = {"root_pos": 2e-3, "root_quat": 5e-3, "joint_pos": 1e-2, "foot_pos": 2e-3}
-"""Largest difference newton - MuJoCo C over 1 s of stepping that passes (m, quaternion units, rad, m); the limits
-of ``tests/test_sim_parity.py``."""
-
 
 @dataclass(frozen=True, kw_only=True)
 class CheckSizes:
@@ -176,7 +167,7 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
     between do not change what the backend steps; the sides are timed in alternating rounds
     (:mod:`gaitlib.throughput.sim`)."""
     from gaitlib.sim import make_backend
-    from gaitlib.throughput.sim import _rates, _settle
+    from gaitlib.throughput.sim import mujoco_warp_references, settle, timed_rates
 
     start = time.perf_counter()
     backend = make_backend("newton", num_worlds=worlds, device=sizes.device)
@@ -184,7 +175,7 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
     try:
         targets = torch.tensor(backend.robot.default_joint_pos, device=backend.device).repeat(worlds, 1)
         start = time.perf_counter()
-        _settle(backend, targets)  # 1 s of simulated time; on a fresh machine, also Warp's compilation of the step
+        settle(backend, targets)  # 1 s of simulated time; on a fresh machine, also Warp's compilation of the step
         settle_s = time.perf_counter() - start
 
         def run_backend() -> None:
@@ -192,8 +183,8 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
             backend.step()
             backend.state()
 
-        references = _mujoco_warp_references(backend)
-        rate = _rates({"env": run_backend, **references}, worlds=worlds, seconds=sizes.sim_seconds, rounds=4)
+        references = mujoco_warp_references(backend)
+        rate = timed_rates({"env": run_backend, **references}, worlds=worlds, seconds=sizes.sim_seconds, rounds=4)
     finally:
         backend.close()
     raw = max(rate[key] for key in references)
@@ -210,50 +201,17 @@ def measure_sim(sizes: CheckSizes, *, worlds: int) -> dict[str, object]:
     }
 
 
-def _mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
-    """One control step (``substeps`` calls of ``mujoco_warp.step``) of every world on the backend's own
-    mujoco_warp model and data: eagerly, and as a captured Warp graph (left out, with its traceback on stderr,
-    where the capture fails)."""
-    import mujoco_warp
-    import warp as wp
-
-    # NewtonBackend has no public accessor for these (yet): its solver, Warp device and stream scope.
-    solver, device, scope = backend._solver, backend._wp_device, backend._scope
-    model, data, substeps = solver.mjw_model, solver.mjw_data, backend.robot.substeps
-
-    def eager() -> None:
-        with scope():
-            for _ in range(substeps):
-                mujoco_warp.step(model, data)
-        wp.synchronize_device(device)
-
-    eager()  # makes and loads mujoco_warp's lazily created kernels before the capture
-    # On CUDA, captured and launched on Warp's own stream of the device (torch's default stream cannot be captured);
-    # every runner waits for the whole device at its end, so the two streams never overlap.
-    try:
-        with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
-            for _ in range(substeps):
-                mujoco_warp.step(model, data)
-    except Exception:  # noqa: BLE001 - the eager reference still gives the measurement
-        traceback.print_exc(file=sys.stderr)
-        return {"raw_eager": eager}
-    graph = capture.graph
-
-    def graphed() -> None:
-        wp.capture_launch(graph)
-        wp.synchronize_device(device)
-
-    return {"raw_eager": eager, "raw_graph": graphed}
-
-
 def measure_parity(sizes: CheckSizes) -> dict[str, object]:
-    """The scenario of ``tests/test_sim_parity.py`` with the newton backend on ``sizes.device``: two worlds
-    stepping (and, in a second run, falling and pushed) for 1 s next to the MuJoCo C backend."""
+    """The parity scenario of ``tests/test_sim_parity.py`` (:mod:`gaitlib.sim.parity`) with the newton backend on
+    ``sizes.device``: two worlds stepping (and, in a second run, falling and pushed) for 1 s beside MuJoCo C."""
+    from gaitlib.sim.parity import PARITY_LIMITS, parity_run
+
     cases = {
-        name: _parity_case(sizes.device, airborne=name == "falling-pushed") for name in ("ground", "falling-pushed")
+        name: parity_run(airborne=name == "falling-pushed", newton_device=sizes.device)
+        for name in ("ground", "falling-pushed")
     }
-    worst = {name: max(case[name] for case in cases.values()) for name in PARITY_LIMITS}
-    failed = [name for name, case in cases.items() if not case["passed"]]
+    worst = {name: max(case.worst[name] for case in cases.values()) for name in PARITY_LIMITS}
+    failed = [name for name, case in cases.items() if not case.passed]
     return {
         "passed": not failed,
         "failed_cases": failed,
@@ -261,47 +219,8 @@ def measure_parity(sizes: CheckSizes) -> dict[str, object]:
         "max_root_quat_diff": worst["root_quat"],
         "max_joint_pos_diff_rad": worst["joint_pos"],
         "max_foot_pos_diff_m": worst["foot_pos"],
-        "foot_contact_mismatches": cases["ground"]["foot_contact_mismatches"],
+        "foot_contact_mismatches": cases["ground"].contact_mismatches,
     }
-
-
-def _parity_case(device: str, *, airborne: bool) -> dict[str, object]:
-    from gaitlib.sim import make_backend, standing_state
-
-    if _REPO not in sys.path:
-        sys.path.insert(0, _REPO)
-    from tests.test_sim_parity import stepping_targets  # the test's motion, so that both check the same thing
-
-    n = 2
-    backends = [make_backend("mujoco", num_worlds=n), make_backend("newton", num_worlds=n, device=device)]
-    try:
-        start = standing_state(backends[0].robot, n)
-        if airborne:
-            start.root_pos[:, 2] = 1.0
-        for backend in backends:
-            backend.reset(torch.arange(n), start)
-            if airborne:
-                backend.set_trunk_force(torch.tensor([0]), torch.tensor([[0.0, 50.0, 0.0]]))
-        worst, mismatches, diverged = dict.fromkeys(PARITY_LIMITS, 0.0), 0, False
-        for k in range(30):  # 1 s at 30 Hz
-            states = []
-            for backend in backends:
-                backend.set_pd_targets(stepping_targets(k / 30, n))
-                diverged |= bool(backend.step().any())
-                states.append(backend.state())
-            c, w = (_on_cpu(state) for state in states)
-            for name in worst:
-                worst[name] = max(worst[name], (getattr(c, name) - getattr(w, name)).abs().max().item())
-            mismatches += int(not airborne and k >= 2 and not torch.equal(c.foot_contact, w.foot_contact))
-    finally:
-        for backend in backends:
-            backend.close()
-    passed = not diverged and mismatches == 0 and all(worst[name] < limit for name, limit in PARITY_LIMITS.items())
-    return {**worst, "foot_contact_mismatches": mismatches, "passed": passed}
-
-
-def _on_cpu(state):
-    return type(state)(**{name: value.cpu() for name, value in vars(state).items()})
 
 
 def measure_train(sizes: CheckSizes) -> dict[str, object]:

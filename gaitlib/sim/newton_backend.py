@@ -134,7 +134,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         rows = ids[:, None]
         self._ke[rows, self._joint_dofs] = kp
         self._kd[rows, self._joint_dofs] = kd
-        with self._scope():
+        with self.warp_scope():
             self._solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
 
     def set_dynamics(
@@ -160,7 +160,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         self._inv_inertia[ids] = base["inv_inertia"] / s[:, None, None, None]
         # Every collision shape of the world, floor included: MuJoCo combines a pair's frictions with max().
         self._mu[ids[:, None], self._collider_shapes] = mu[:, None]
-        with self._scope():
+        with self.warp_scope():
             self._solver.notify_model_changed(
                 newton.ModelFlags.MODEL_PROPERTIES
                 | newton.ModelFlags.BODY_INERTIAL_PROPERTIES
@@ -176,7 +176,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         self._body_f[ids, self._trunk, 0:3] = values
 
     def step(self) -> torch.Tensor:
-        with self._scope():
+        with self.warp_scope():
             self._overflow_seen.zero_()
             for _ in range(self.substeps):
                 self._solver.step(
@@ -218,7 +218,18 @@ class NewtonBackend(NewtonConstruction, SimBackend):
             del self.__dict__[name]
 
     # ----------------------------------------------------------------------------------------- internals
-    def _scope(self) -> contextlib.ExitStack:
+    @property
+    def mujoco_warp(self) -> tuple:
+        """The ``mujoco_warp`` (Model, Data) this backend steps, for references that step them without Newton or
+        gaitlib work (``benchmarks/gpu_check.py``); Newton writes its state into the Data at each of its steps."""
+        return self._solver.mjw_model, self._solver.mjw_data
+
+    @property
+    def warp_device(self):
+        """The Warp device the backend runs on."""
+        return self._wp_device
+
+    def warp_scope(self) -> contextlib.ExitStack:
         """Warp's device and, on CUDA, torch's current stream, so Warp and torch work stays in order."""
         stack = contextlib.ExitStack()
         stack.enter_context(wp.ScopedDevice(self._wp_device))
@@ -242,7 +253,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         s = self._reset_state
         rows = mask[:, None]
         pos, quat, lin, ang = s.root_pos, s.root_quat, s.root_lin_vel, s.root_ang_vel
-        with self._scope():
+        with self.warp_scope():
             # mujoco_warp's coordinates use the contract's conventions.
             p, v = self._root_qpos, self._root_qvel
             qpos, qvel = self._qpos.clone(), self._qvel.clone()

@@ -198,7 +198,7 @@ class NewtonConstruction:
             | newton.ModelFlags.SHAPE_PROPERTIES
             | newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES
         )
-        wp.synchronize_device(self._wp_device)  # later work runs on torch's stream (see _scope)
+        wp.synchronize_device(self._wp_device)  # later work runs on torch's stream (see warp_scope)
 
     def _map_entities(self, template: RobotTemplate) -> None:
         """Indices of the driven joints, trunk, feet and geoms in mujoco_warp's and in Newton's per-world layout."""

@@ -22,7 +22,7 @@ import torch
 
 from gaitlib.sim import SimBackend
 
-__all__ = ["ThroughputResult", "measure_throughput"]
+__all__ = ["ThroughputResult", "measure_throughput", "mujoco_warp_references", "settle", "timed_rates"]
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rou
     """Time ``backend`` and the plain MuJoCo C references for about ``seconds`` each (s)."""
     n = backend.num_worlds
     targets = torch.tensor(backend.robot.default_joint_pos, device=backend.device).repeat(n, 1)
-    qpos, qvel = _settle(backend, targets)
+    qpos, qvel = settle(backend, targets)
 
     def run_backend() -> None:
         backend.set_pd_targets(targets)
@@ -70,7 +70,7 @@ def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rou
         backend.state()
 
     with _mujoco_references(backend, qpos, qvel, threads) as references:
-        rate = _rates({"env": run_backend, **references}, worlds=n, seconds=seconds, rounds=rounds)
+        rate = timed_rates({"env": run_backend, **references}, worlds=n, seconds=seconds, rounds=rounds)
     raw = max(rate["mj_step"], rate["rollout"])
     return ThroughputResult(
         backend=backend.name,
@@ -88,7 +88,7 @@ def measure_throughput(backend: SimBackend, *, seconds: float, threads: int, rou
     )
 
 
-def _settle(backend: SimBackend, targets: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+def settle(backend: SimBackend, targets: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
     """Hold ``targets`` for 1 s so every world is in ground contact; its (N, nq) qpos and (N, nv) qvel."""
     backend.set_pd_targets(targets)
     for _ in range(int(backend.robot.control_hz)):
@@ -138,7 +138,9 @@ def _mujoco_references(
         yield {"mj_step": lambda: list(pool.map(step_chunk, chunks)), "rollout": run_rollout}
 
 
-def _rates(runners: dict[str, Callable[[], None]], *, worlds: int, seconds: float, rounds: int) -> dict[str, float]:
+def timed_rates(
+    runners: dict[str, Callable[[], None]], *, worlds: int, seconds: float, rounds: int
+) -> dict[str, float]:
     """Control steps per second (all worlds) of each runner, timed in ``rounds`` interleaved turns of
     ``seconds / rounds`` each so that a change in machine load affects all alike."""
     steps = dict.fromkeys(runners, 0)
@@ -151,3 +153,39 @@ def _rates(runners: dict[str, Callable[[], None]], *, worlds: int, seconds: floa
                 steps[key] += worlds
             elapsed[key] += time.perf_counter() - start
     return {key: steps[key] / elapsed[key] for key in runners}
+
+
+def mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
+    """One control step (``substeps`` calls of ``mujoco_warp.step``) of every world of the newton ``backend``'s own
+    mujoco_warp model and data, with no Newton or gaitlib work: ``raw_eager`` launches each kernel, ``raw_graph``
+    replays one captured Warp graph (a CUDA graph on a GPU; left out where the capture fails). Each waits for the
+    device at its end. Newton writes its state into that data at the start of each of its steps, so these steps
+    between the backend's do not change what the backend computes."""
+    import mujoco_warp
+    import warp as wp
+
+    (model, data), device, substeps = backend.mujoco_warp, backend.warp_device, backend.robot.substeps
+
+    def eager() -> None:
+        with backend.warp_scope():
+            for _ in range(substeps):
+                mujoco_warp.step(model, data)
+        wp.synchronize_device(device)
+
+    eager()  # makes and loads mujoco_warp's lazily created kernels before the capture
+    # On CUDA the graph is captured and launched on Warp's own stream (torch's default stream cannot be captured);
+    # every runner waits for the whole device at its end, so the two streams never overlap.
+    try:
+        with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
+            for _ in range(substeps):
+                mujoco_warp.step(model, data)
+    except Exception:  # noqa: BLE001 - Warp raises several types; the eager reference still measures
+        return {"raw_eager": eager}
+    graph = capture.graph
+
+    def graphed() -> None:
+        wp.capture_launch(graph)
+        wp.synchronize_device(device)
+
+    return {"raw_eager": eager, "raw_graph": graphed}
+
