@@ -2,8 +2,8 @@
 
 :func:`gaitlib` starts a fresh process (the installed entry point's code path, C-level output included), as every
 command that simulates or writes is tested. :func:`gaitlib_quick` calls the same entry point,
-:func:`gaitlib.cli.main`, inside the test process: for refusals that happen before any work, where a new
-interpreter would spend seconds importing torch to print one line.
+:func:`gaitlib.cli.main`, inside the test process: for refusals that happen before any work, and commands that
+only read (``fit --evaluate``), where a new interpreter would spend seconds importing torch.
 """
 
 from __future__ import annotations

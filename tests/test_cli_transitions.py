@@ -55,7 +55,7 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert sorted(p.name for p in (library / "switching").iterdir()) == ["accuracy.json", "net.pt", "tmt.json"]
     assert json.loads((library / "switching" / "accuracy.json").read_text()) == report
 
-    scored = gaitlib("fit", "--evaluate", "--data", data, "--library", lib, "--json")
+    scored = gaitlib_quick("fit", "--evaluate", "--data", data, "--library", lib, "--json")
     assert scored.returncode == 0, scored.stderr
     accuracy = json.loads(scored.stdout)["accuracy"]
     assert set(accuracy) <= {"stand-trot", "trot-stand"} and accuracy
