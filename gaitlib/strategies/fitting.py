@@ -101,13 +101,11 @@ def fit_library(
             raise UnknownNameError("input", kind, list(INPUT_KINDS))
     if not inputs:
         raise UnknownNameError("input", "", list(INPUT_KINDS))
-    identities = dict(zip(data.header.gaits, data.header.identities, strict=True))
-    library.check_identities(identities, what=f"transition data {', '.join(map(str, sources))}")
+    identities = _checked_identities(library, data, sources)
     results = {}
     for kind in dict.fromkeys(inputs):
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
-    source = ", ".join(map(str, sources))
     fitted = FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
@@ -116,7 +114,7 @@ def fit_library(
     )
     with library.publish_switching() as staging:  # the three replace the library's together, or none does
         save_net(staging / Library.NET, next(iter(results.values())))
-        save_table(staging / Library.TMT, build_table(data, identities=identities, source=source))
+        save_table(staging / Library.TMT, build_table(data, identities=identities, source=", ".join(fitted.data)))
         write_json(staging / Library.ACCURACY, fitted.as_dict())
     return fitted
 
@@ -124,9 +122,15 @@ def fit_library(
 def evaluate_library(library: Library, data: TransitionData, *, sources: Sequence[Path | str]) -> dict:
     """Score ``library``'s transition-net on ``data`` (balanced per pair): input kind, data and accuracy per
     ``"m-n"`` (0-1). Data of other policies than the library's are refused."""
-    identities = dict(zip(data.header.gaits, data.header.identities, strict=True))
-    library.check_identities(identities, what=f"transition data {', '.join(map(str, sources))}")
+    _checked_identities(library, data, sources)
     library.check_switching()
     saved = load_net(library.net_path, identities=library.identities(data.header.gaits))
     accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, data).items()}
     return {"input": saved.metadata["input"], "data": [str(s) for s in sources], "accuracy": accuracy}
+
+
+def _checked_identities(library: Library, data: TransitionData, sources: Sequence[Path | str]) -> dict[str, str]:
+    """Gait name -> identity of the policies ``data`` were collected with, refused unless they are the library's."""
+    identities = dict(zip(data.header.gaits, data.header.identities, strict=True))
+    library.check_identities(identities, what=f"transition data {', '.join(map(str, sources))}")
+    return identities

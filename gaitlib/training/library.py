@@ -216,7 +216,8 @@ class Library:
         """The loaded entry of gait ``name`` (loaded and checked on first use); :class:`LibraryError` if it is
         missing or damaged."""
         if name not in self._entries:
-            self._entries[name] = _load_entry(self.root, name, known=self.gaits())
+            self.order([name])  # one refusal, naming the entries there are, for a gait the library lacks
+            self._entries[name] = _load_entry(self.root, name)
         return self._entries[name]
 
     def entries(self, names: Iterable[str] | None = None) -> list[LibraryEntry]:
@@ -229,8 +230,8 @@ class Library:
 
     def check_identities(self, recorded: Mapping[str, str], *, what: str) -> None:
         """Refuse a file made for other policies than this library's (see :func:`check_identities`)."""
-        present = [g for g in recorded if g in self.gaits()]
-        check_identities(recorded, self.identities(present), what=what)
+        known = self.gaits()
+        check_identities(recorded, self.identities(g for g in recorded if g in known), what=what)
 
     def shared_policy_settings(self, names: Iterable[str] | None = None) -> tuple[int, dict]:
         """The latent size and action settings (``type``, ``scale``, ``clip``) that the entries of ``names`` share:
@@ -286,12 +287,11 @@ class Library:
         return self.root / description.name
 
 
-def _load_entry(library: Path, name: str, *, known: tuple[str, ...]) -> LibraryEntry:
-    """Load and check ``library/<name>/``; raises :class:`LibraryError` with a one-line reason."""
+def _load_entry(library: Path, name: str) -> LibraryEntry:
+    """Load and check the entry ``library/<name>/`` (which exists); raises :class:`LibraryError` with a one-line
+    reason."""
     folder = library / name
     meta_path = folder / "metadata.json"
-    if name not in known:
-        raise LibraryError(f"no library entry for gait '{name}' in {library} (entries: {', '.join(known) or 'none'})")
     try:
         metadata = json.loads(meta_path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as error:
