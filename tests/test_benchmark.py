@@ -42,6 +42,10 @@ def test_wilson_interval_matches_hand_computed_values() -> None:
     low, high = wilson_interval(5, 10)
     assert (low, high) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
     assert wilson_interval(0, 0) == (0.0, 1.0)
+    for n in range(1, 60):  # the bounds hold the rate itself, even where rounding alone would put them past it
+        for k in (0, n):
+            low, high = wilson_interval(k, n)
+            assert low <= k / n <= high
 
 
 def test_the_net_margin_has_a_hand_computed_interval() -> None:

@@ -25,7 +25,8 @@ def wilson_interval(successes: int, samples: int, z: float = _Z95) -> tuple[floa
     denominator = 1 + z * z / samples
     centre = (p + z * z / (2 * samples)) / denominator
     half = z * math.sqrt(p * (1 - p) / samples + z * z / (4 * samples * samples)) / denominator
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # The interval holds p exactly; rounding alone could put a bound past it (5.6e-17 above p = 0, say).
+    return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
 
 
 @dataclass(frozen=True)
