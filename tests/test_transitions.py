@@ -4,6 +4,7 @@ with tiny policies."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import shutil
 
 import h5py
@@ -194,6 +195,22 @@ def test_other_schema_versions_are_clear_errors_and_version_1_is_read_only(tmp_p
     assert old.read_bytes() == before
 
 
+def test_files_written_before_fall_times_were_recorded_read_them_as_nan(tmp_path) -> None:
+    path = tmp_path / "old.h5"
+    make_file(path, synthetic(6))
+    part = next((tmp_path / "old.h5.parts").glob("part-*.h5"))
+    # The file as gaitlib wrote it before the column existed: the part without 'fall_after' (checksum redone).
+    with h5py.File(part, "a") as f:
+        del f["fall_after"]
+    with h5py.File(path, "a") as f:
+        table = f["parts"][...]
+        table["sha256"][0] = hashlib.sha256(part.read_bytes()).hexdigest()
+        f["parts"][...] = table
+    samples = read(path).samples
+    assert len(samples) == 6 and np.all(np.isnan(samples.fall_after))
+    np.testing.assert_array_equal(samples.success, synthetic(6).success)
+
+
 def test_explicit_state_drops_the_actions_of_each_frame() -> None:
     obs = torch.arange(2 * 158, dtype=torch.float32).reshape(2, 158)
     state = explicit_state(obs)
@@ -223,6 +240,11 @@ def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -
     gravity = np.linalg.norm(s.explicit[:, 12:15], axis=1)  # newest frame's projected gravity: a unit vector
     assert np.all(np.abs(gravity - 1) < 0.1)
     assert np.all(np.isfinite(s.value_source)) and np.all(np.isfinite(s.value_dest))
+    # A success stayed up over the whole horizon; a failure fell after the switch, within the horizon, on a step.
+    assert np.all(np.isinf(s.fall_after[s.success == 1]))
+    falls = s.fall_after[s.success == 0]
+    assert np.all((falls > 0) & (falls <= QUICK.horizon_s + 1e-4))
+    np.testing.assert_allclose(falls * 30, np.round(falls * 30), atol=1e-3)
 
 
 def test_interrupted_collection_resumes_without_loss_or_duplicates(interrupted) -> None:

@@ -1,15 +1,17 @@
-"""``gaitlib collect`` (transition samples to HDF5) and ``gaitlib fit`` (the transition-net)."""
+"""``gaitlib collect`` (transition samples to HDF5), ``gaitlib fit`` (the transition-net) and ``gaitlib map``
+(where the switches of a file fail)."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
 
 from gaitlib.cli.options import COUNT, PUSH_N, SEED, WORLDS, Bounds, bounded
 
-__all__ = ["collect_command", "fit_command"]
+__all__ = ["collect_command", "fit_command", "map_command"]
 
 
 def collect_command(
@@ -134,3 +136,46 @@ def _report(report: dict, as_json: bool) -> None:
             paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
             table.add_row(f"  paper {kind}", *(f"{100 * paper[p]:.2f}" if p in paper else "-" for p in pairs))
     table_console().print(table)
+
+
+def map_command(
+    data: Path = typer.Argument(..., help="A transition file (gaitlib collect --out)."),
+    out: Path | None = typer.Option(None, "--out", help="Folder for map.png and map.json (default: DATA-map/)."),
+    bins: int = bounded(10, "--bins", help="Phase bins per cycle;", bounds=Bounds(low=2, high=100, whole=True)),
+) -> None:
+    """Map where switches fail: per ordered pair, success over source x destination phase, per tenth of either
+    cycle and by the feet on the ground, with counts and 95% intervals, and when switch-caused falls happen."""
+    from gaitlib.benchmark.maps import fall_time_quantile, transition_maps, write_map_json, write_map_plot
+    from gaitlib.cli.tables import print_measures, table_console
+    from gaitlib.transitions import read
+
+    samples = read(data)
+    out = out if out is not None else data.with_name(data.stem + "-map")
+    maps = transition_maps(samples, bins=bins)
+    out.mkdir(parents=True, exist_ok=True)
+    write_map_json(maps, out / "map.json", source=str(data))
+    write_map_plot(maps, out / "map.png", title=f"{data.name}: switch success")
+
+    from rich.table import Table
+
+    def rate(r) -> str:
+        return f"{100 * r.rate:.0f}% [{100 * r.ci95[0]:.0f}, {100 * r.ci95[1]:.0f}] of {r.samples}"
+
+    table = Table(title=f"{data}: success of a switch (95% interval, samples); bins of 1/{bins} cycle")
+    for column in ("pair", "random switch", "best source bin", "worst source bin", "best dest bin", "worst dest bin"):
+        table.add_column(column, justify="left" if column == "pair" else "right")
+    for m in maps:
+        best, worst = m.best_worst_source_bins()
+        dest = sorted(m.by_dest_phase, key=lambda r: r.rate)
+        table.add_row(m.pair, rate(m.overall), rate(best), rate(worst), rate(dest[-1]), rate(dest[0]))
+    table_console().print(table)
+    q99 = fall_time_quantile(maps)
+    print_measures(
+        "switch-caused falls",
+        [
+            ("falls with a recorded time", str(sum(len(m.fall_after_s) for m in maps))),
+            ("99% of them within (s)", "-" if q99 is None else f"{q99:.2f}"),
+            ("horizon of the file (s)", f"{samples.header.settings.get('horizon_s', math.nan):g}"),
+            ("written", f"{out / 'map.png'}, {out / 'map.json'}"),
+        ],
+    )

@@ -182,6 +182,7 @@ class SwitchCycles:
                 switch_time=rows(self._switch_time),
                 world=ids.cpu().numpy(),
                 chunk=np.zeros(len(ids)),
+                fall_after=np.where(rows(alive), np.inf, rows(self._horizon - self._steps_left) * self.env.dt),
             )
         )
         self.pending += len(ids)

@@ -22,6 +22,9 @@ class Column:
     """SI units (``"1"`` for dimensionless, ``"index"``, ``"cycles"``)."""
     description: str
     """What the value is."""
+    missing: float | None = None
+    """The value of rows written before the column existed (files of an older gaitlib lack it); ``None``: every
+    file has the column."""
 
 
 COLUMNS: dict[str, Column] = {
@@ -38,6 +41,10 @@ COLUMNS: dict[str, Column] = {
     "switch_time": Column("float32", None, "s", "time of the switch since the world's episode start"),
     "world": Column("int32", None, "index", "world that produced the sample"),
     "chunk": Column("int32", None, "index", "write batch (counted over all collection runs of the file)"),
+    "fall_after": Column(
+        "float32", None, "s", "time from the switch to the fall; inf: up over the whole horizon; nan: not recorded",
+        missing=float("nan"),
+    ),
 }
 """The per-sample datasets, in file order."""
 
@@ -61,8 +68,12 @@ class TransitionBatch:
     switch_time: np.ndarray
     world: np.ndarray
     chunk: np.ndarray
+    fall_after: np.ndarray | None = None
+    """``None``: not recorded (all nan)."""
 
     def __post_init__(self) -> None:
+        if self.fall_after is None:
+            self.fall_after = np.full(len(self.source), np.nan)
         for name, column in COLUMNS.items():
             setattr(self, name, np.asarray(getattr(self, name), dtype=column.dtype))
         lengths = {len(getattr(self, name)) for name in COLUMNS}

@@ -333,6 +333,8 @@ def _rows(f: h5py.File, name: str, start: int, stop: int, header: TransitionHead
     """Rows ``start`` to ``stop`` of dataset ``name``, checked against the column's dtype and width."""
     column = COLUMNS[name]
     width = _width(column, header.latent_dim)
+    if column.missing is not None and name not in f:  # written before the column existed
+        return np.full((stop - start, *width), column.missing, dtype=column.dtype)
     try:
         ds = f[name]
         if ds.shape[1:] != width or ds.dtype != np.dtype(column.dtype) or ds.shape[0] < stop:
