@@ -27,8 +27,12 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
     m.actuator_forcerange[servo] = [-ctl["torque_limit"], ctl["torque_limit"]]
     feet = [m.geom(name).id for name in robot["foot_names"]]
     ground = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)
-    rows, last, step = np.array(ref["rows"]), len(ref["rows"]) - 1, ref["phase_per_step"]
+    width, last, step = len(ref["rows"][0]), len(ref["rows"]) - 1, ref["phase_per_step"]
+    rows = np.column_stack([ref["rows"], ref.get("yaw", np.zeros(last + 1))])  # last column: the reference's yaw
     joint_cols = next(slice(c["start"], c["start"] + c["size"]) for c in ref["columns"] if c["name"] == "joint_pos")
+
+    def yaw(quat: np.ndarray) -> float:  # rotation about world z of a (w, x, y, z) quaternion, rad
+        return np.arctan2(2 * (quat[0] * quat[3] + quat[1] * quat[2]), 1 - 2 * (quat[2] ** 2 + quat[3] ** 2))
 
     def row(phase: float) -> np.ndarray:  # the reference at a phase, linearly interpolated
         x = (phase % 1.0 if ref["loop"] else min(max(phase, 0.0), 1.0)) * last
@@ -36,7 +40,7 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
         return rows[i] + (x - i) * (rows[i + 1] - rows[i])
 
     policy = onnxruntime.InferenceSession(str(Path(entry) / "policy.onnx"))
-    action, phase, history, rot = np.zeros(len(q)), 0.0, [], np.zeros(9)
+    action, phase, history, rot, start_yaw = np.zeros(len(q)), 0.0, [], np.zeros(9), yaw(d.qpos[3:7])
     mujoco.mj_forward(m, d)
     for _ in range(round(seconds * ctl["rate_hz"])):
         mujoco.mju_quat2Mat(rot, d.qpos[3:7])  # trunk-to-world rotation R, row-major: R^T (0, 0, -1) = -R[2]
@@ -45,7 +49,10 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
                   "foot_contact": [float(f in touching) for f in feet], "prev_action": action}
         frame = np.concatenate([np.asarray(values[s["name"]]) / s["divided_by"] for s in obs["frame"]])
         history = [frame] * obs["history"]["frames"] if not history else [frame] + history[:-1]  # newest first
-        o = np.concatenate(history + [row(phase + k * step) for k in ref["offsets_steps"]]).astype(np.float32)
+        o = history + [row(phase + k * step)[:width] for k in ref["offsets_steps"]]
+        if "heading" in obs:  # the reference's heading minus the trunk's, wrapped to [-pi, pi)
+            o.append([(start_yaw + row(phase)[width] - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])
+        o = np.concatenate(o).astype(np.float32)
         action = np.clip(policy.run(None, {dep["onnx"]["inputs"][0]["name"]: o[None]})[0][0], -act["clip"], act["clip"])
         yield o, action
         target = row(phase + step)[joint_cols] + act["scale"] * action  # the reference one control step ahead

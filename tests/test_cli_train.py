@@ -34,7 +34,7 @@ def test_unknown_gait_is_one_error_line(tmp_path) -> None:
     result = gaitlib_quick("train", "moonwalk", "--library", str(tmp_path))
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        "gaitlib: error: unknown gait 'moonwalk' (known: bound, pace, pronk, stand, trot, walk)"
+        "gaitlib: error: unknown gait 'moonwalk' (known: bound, pace, pace_slow, pronk, stand, trot, trot_slow, walk)"
     ]
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 
 import pytest
 import torch
@@ -16,8 +17,11 @@ from gaitlib.envs.randomization import (
     RandomizationConfig,
     sample_world_parameters,
 )
+from gaitlib.envs.terminations import orientation_lost
 from gaitlib.gaits import clip_from_description, get_gait
+from gaitlib.rotations import quat_from_yaw, quat_multiply
 from gaitlib.sim import make_backend
+from gaitlib.training import get_preset
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +37,7 @@ def make_env(clips, names=("trot",), n=4, **cfg):
 def test_vec_env_contract(clips) -> None:
     env = make_env(clips, n=3)
     obs = env.get_observations()
-    assert obs["policy"].shape == (3, obs_fn.ACTOR_OBS_DIM) == (3, 158)
+    assert obs["policy"].shape == (3, obs_fn.ObservationConfig().actor_dim) == (3, 159)
     assert obs["privileged"].shape == (3, obs_fn.PRIVILEGED_DIM)
     assert obs["policy"].dtype == torch.float32
     assert env.num_actions == 12 and env.max_episode_length == 300
@@ -210,8 +214,8 @@ def test_preview_switch_shows_the_observations_a_switch_would_give_and_changes_n
 
 
 def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) -> None:
-    # Library entries store layout() and are refused on load when it differs: a change here means retraining.
-    assert obs_fn.layout() == {
+    # Library entries store layout() and are refused on load when it is none of these: a change means retraining.
+    old = {
         "frame": ["joint_pos:12", "projected_gravity:3", "ang_vel_trunk:3", "foot_contact:4", "prev_action:12"],
         "history": 3,
         "reference_offsets": [1, 2, 10, 30],
@@ -219,6 +223,10 @@ def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) 
         "actor_dim": 158,
         "privileged_dim": 14,
     }
+    assert obs_fn.layout(obs_fn.ObservationConfig(heading=False)) == old  # gaitlib 0.1's libraries
+    assert obs_fn.layout() == old | {"actor_dim": 159, "heading": ["heading_error:1"]}
+    assert obs_fn.observation_config(old) == obs_fn.ObservationConfig(heading=False)
+    assert obs_fn.observation_config(old | {"actor_dim": 160}) is None
     # The critic sees kp in units of the default stiffness and the push in units of 100 N, at the declared columns.
     env = make_env(clips, n=2, pushes=PushConfig(max_force=150.0, fixed_force=True, interval=(0.03, 0.04)))
     for _ in range(3):
@@ -228,3 +236,70 @@ def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) 
     assert torch.allclose(privileged[:, where["kp"]].squeeze(1), env.world_parameters.kp / 60.0)
     assert torch.allclose(privileged[:, where["push_force"]] * 100.0, env.push_force)
     assert torch.allclose(env.push_force.norm(dim=1), torch.full((2,), 150.0))
+
+
+def _still(delay: tuple[int, int]) -> RandomizationConfig:
+    """Randomization on, but every range a single value and no noise: only the action delay acts."""
+    nominal = sample_world_parameters(RandomizationConfig(enabled=False), 1, torch.Generator())
+    return RandomizationConfig(
+        gravity_scale=(1.0, 1.0), action_noise=0.0, observation_noise=0.0, mass_scale=(1.0, 1.0),
+        friction=(nominal.friction.item(),) * 2, latency=(0.0, 0.0), kp=(nominal.kp.item(),) * 2,
+        kd=(nominal.kd.item(),) * 2, action_delay_steps=delay,
+    )
+
+
+def test_the_actor_sees_its_heading_error(clips) -> None:
+    """Robots turned away from the reference by +0.4 and -0.2 rad read heading errors of -0.4 and +0.2 rad as the
+    last value; without the option the observation is the same less that value (gaitlib 0.1's layout)."""
+    envs = [
+        make_env(clips, ("stand",), n=2, random_start_phase=False, randomization=RandomizationConfig(enabled=False),
+                 observation=obs_fn.ObservationConfig(heading=heading))
+        for heading in (True, False)
+    ]
+    for env in envs:
+        start = env.reference.frame()
+        start.root_quat = quat_multiply(quat_from_yaw(torch.tensor([0.4, -0.2])), start.root_quat)
+        env.backend.reset(torch.arange(2), start)
+    with_heading, without = (env.step(torch.zeros(2, 12))[0]["policy"] for env in envs)
+    assert with_heading.shape == (2, 159) and without.shape == (2, 158)
+    torch.testing.assert_close(with_heading[:, -1], torch.tensor([-0.4, 0.2]), atol=0.01, rtol=0)
+    torch.testing.assert_close(with_heading[:, :-1], without)
+
+
+def test_a_delayed_action_reaches_the_servos_a_control_step_later(clips) -> None:
+    env = make_env(clips, ("trot",), n=2, random_start_phase=False, randomization=_still((0, 1)))
+    env.world_parameters.action_delay[:] = torch.tensor([0.0, 1.0])  # world 0 acts at once, world 1 a step late
+    start_pose = env.reference.frame().joint_pos
+    sent = []
+    set_targets = env.backend.set_pd_targets
+    env.backend.set_pd_targets = lambda targets: (sent.append(targets.clone()), set_targets(targets))[1]
+    for _ in range(3):
+        env.step(torch.ones(2, 12))
+    torch.testing.assert_close(sent[0][1], start_pose[1])  # nothing reached world 1's servos yet: it holds the start
+    for step in (1, 2):  # then each target world 0 got, one step late (both worlds run the same reference)
+        torch.testing.assert_close(sent[step][1], sent[step - 1][0])
+
+
+def test_the_push_curriculum_grows_to_its_largest_push() -> None:
+    preset = get_preset("cpu")
+    ramp = preset.push_ramp_iterations
+    assert [preset.push_max(i) for i in (0, ramp // 2, ramp, 10 * ramp)] == pytest.approx(
+        [0.0, preset.push_force / 2, preset.push_force, preset.push_force]
+    )
+    schedule = PushSchedule(PushConfig(max_force=0.0, fixed_force=True, interval=(0.03, 0.04)), 3, 1 / 30,
+                            torch.Generator().manual_seed(0))
+    schedule.set_max_force(120.0)
+    for _ in range(3):
+        schedule.advance()
+    torch.testing.assert_close(schedule.force.norm(dim=1), torch.full((3,), 120.0))
+
+
+def test_a_fall_in_evaluation_is_a_tilt_not_a_turn() -> None:
+    level = torch.tensor([[1.0, 0.0, 0.0, 0.0]])
+    turned = quat_from_yaw(torch.tensor([2.0]))  # 115 degrees about z
+    rolled = torch.tensor([[math.cos(0.9), math.sin(0.9), 0.0, 0.0]])  # 103 degrees about x
+    assert orientation_lost(turned, level, max_error=math.pi / 2, heading=True)
+    assert not orientation_lost(turned, level, max_error=math.pi / 2, heading=False)
+    for heading in (True, False):
+        assert orientation_lost(rolled, level, max_error=math.pi / 2, heading=heading)
+        assert not orientation_lost(level, turned, max_error=math.pi / 2, heading=False)

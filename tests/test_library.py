@@ -13,9 +13,12 @@ import numpy as np
 import pytest
 from conftest import copy_library
 
+from gaitlib.envs.observations import ObservationConfig
 from gaitlib.errors import GaitlibError, TransitionDataError
+from gaitlib.gaits import get_gait
 from gaitlib.strategies.fitting import fit_library
 from gaitlib.training import Library, LibraryError, publish
+from gaitlib.training.policy import build_models
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 
 
@@ -120,7 +123,8 @@ else:
         next(entry.policy.actor.parameters()).add_(1.0)  # new weights: a new identity
     library.save_entry(
         description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
-        networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+        networks=entry.metadata["networks"], action=entry.action, observation=entry.observation, training={},
+        evaluation={},
     )
 """
 
@@ -141,7 +145,8 @@ def test_a_writer_killed_while_replacing_an_entry_leaves_the_old_or_the_new_one(
     entry = after.entry("stand")  # whole: its checksum and files agree
     after.save_entry(  # the next write cleans what the killed one left
         description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
-        networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+        networks=entry.metadata["networks"], action=entry.action, observation=entry.observation, training={},
+        evaluation={},
     )
     assert sorted(p.name for p in library.root.iterdir() if p.is_dir()) == ["stand", "trot"]
 
@@ -164,7 +169,8 @@ def test_a_second_writer_of_an_entry_is_refused_in_one_line(tiny_library, tmp_pa
         with pytest.raises(GaitlibError, match=rf"library/stand is being written by process {os.getpid()}$"):
             library.save_entry(
                 description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
-                networks=entry.metadata["networks"], action=entry.action, training={}, evaluation={},
+                networks=entry.metadata["networks"], action=entry.action, observation=entry.observation,
+                training={}, evaluation={},
             )
     assert library.entry("stand").identity == tiny_library.entry("stand").identity
 
@@ -209,3 +215,24 @@ def test_a_missing_gait_folder_is_named_as_missing(tmp_path) -> None:
     for strategy, what in (("tmt", "TMT"), ("net", "transition-net")):
         with pytest.raises(TransitionDataError, match=rf"^{what} .* needs gait 'stand', which the library does not"):
             get_strategy(strategy, setup.resources)
+
+
+def test_entries_that_read_other_observations_are_not_mixed(tiny_library, tmp_path) -> None:
+    """An entry of gaitlib 0.1's layout (158 values, no heading error, trained without an action delay) loads, and
+    runs as it was trained; beside the current layout's entries it is refused in one line."""
+    library = copy_library(tiny_library, tmp_path / "library")
+    entry = library.entry("stand")
+    old = ObservationConfig(heading=False)
+    actor, critic = build_models(
+        actor_hidden=(32, 16), critic_hidden=(32, 16), activation="elu", num_actions=12, observation=old
+    )
+    library.save_entry(
+        description=get_gait("pace"), actor=actor, critic=critic, networks=entry.metadata["networks"],
+        action=entry.action, observation=old, training={}, evaluation={},
+    )
+    pace = Library(library.root).entry("pace")
+    assert pace.observation == old and pace.action_delay_steps == (0, 0)
+    assert Library(library.root).shared_policy_settings(["pace"]).observation == old
+    assert library.shared_policy_settings(["stand", "trot"]).action_delay_steps == (0, 1)
+    with pytest.raises(LibraryError, match=r"read different observations \(heading error shown: "):
+        Library(library.root).shared_policy_settings()

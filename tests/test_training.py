@@ -60,7 +60,7 @@ def test_latent_and_value_have_documented_shapes(trained) -> None:
     entry = Library(tmp_path / "library").entry("stand")
     from tensordict import TensorDict
 
-    obs = TensorDict({"policy": torch.randn(5, 158), "privileged": torch.randn(5, 14)}, batch_size=[5])
+    obs = TensorDict({"policy": torch.randn(5, 159), "privileged": torch.randn(5, 14)}, batch_size=[5])
     action, latent = entry.policy.act_and_latent(obs)
     assert action.shape == (5, 12) and latent.shape == (5, 16) and entry.policy.value(obs).shape == (5,)
     assert torch.allclose(action, entry.policy.act(obs))
@@ -74,9 +74,9 @@ def test_onnx_export_has_a_batch_axis_and_matches_the_torch_actor(trained) -> No
     entry = Library(tmp_path / "library").entry("stand")
     onnx_file = tmp_path / "library" / "stand" / "policy.onnx"
     session = onnxruntime.InferenceSession(str(onnx_file), providers=["CPUExecutionProvider"])
-    assert [(io.name, io.shape) for io in session.get_inputs()] == [("obs", ["batch", 158])]
+    assert [(io.name, io.shape) for io in session.get_inputs()] == [("obs", ["batch", 159])]
     assert [(io.name, io.shape) for io in session.get_outputs()] == [("actions", ["batch", 12])]
-    x = torch.randn(7, 158, generator=torch.Generator().manual_seed(0))
+    x = torch.randn(7, 159, generator=torch.Generator().manual_seed(0))
     expected = entry.policy.act(TensorDict({"policy": x, "privileged": torch.zeros(7, 14)}, batch_size=[7]))
     (got,) = session.run(None, {"obs": x.numpy()})
     np.testing.assert_allclose(got, expected.numpy(), atol=1e-5, rtol=1e-5)

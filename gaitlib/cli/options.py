@@ -23,6 +23,7 @@ __all__ = [
     "MAX_MAGNITUDES",
     "MEASURE_SECONDS",
     "PUSH_N",
+    "DELAY_STEPS",
     "SEED",
     "WORLDS",
     "WORLD_BYTES",
@@ -93,6 +94,8 @@ COUNT = Bounds(low=1, high=1e6, whole=True)
 """Iterations, epochs, samples per benchmark cell, checkpoint spacing."""
 EPISODE_SECONDS = Bounds(low=0, high=600, unit="s", low_open=True)
 """Simulated lengths of a run or an evaluation episode, s."""
+DELAY_STEPS = Bounds(low=0, high=10, whole=True)
+"""Action delays, control steps (10: a third of a second at 30 Hz)."""
 MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
 

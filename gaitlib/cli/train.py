@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from gaitlib.cli.options import COUNT, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
+from gaitlib.cli.options import COUNT, DELAY_STEPS, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
 __all__ = ["eval_command", "train_command"]
@@ -112,33 +112,43 @@ def eval_command(
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     push: float = bounded(0.0, "--push", help="Largest random push during the episodes (0: none);", bounds=PUSH_N),
+    delay: int | None = bounded(
+        None, "--action-delay", help="Control steps (33 ms) every action waits (default: training's random delay);",
+        bounds=DELAY_STEPS,
+    ),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
-    """Evaluate a library policy under paper Table 1 randomization: fall rate, tracking errors, episode length."""
+    """Evaluate a library policy under paper Table 1 randomization: falls, heading held, tracking errors."""
     from gaitlib.cli.options import check_worlds
+    from gaitlib.envs import EnvConfig
     from gaitlib.training import Library
     from gaitlib.training.evaluate import evaluate_policy
 
     check_worlds("--episodes", episodes, backend=backend)
-    entry = Library(library).entry(gait)
+    lib = Library(library)
+    entry = lib.entry(gait)
     result = evaluate_policy(
         entry.policy,
         entry.clip,
-        action_scale=entry.action_scale,
+        env_cfg=lib.shared_policy_settings([gait]).env_config(EnvConfig()),
         episodes=episodes,
         seconds=seconds,
         backend=backend,
         push_force=push,
+        action_delay_steps=delay,
         seed=seed,
     )
     if as_json:
         print(json.dumps({"gait": gait} | result.as_dict()))
         return
     print_measures(
-        f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N",
+        f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N, action "
+        + ("delay 0-1 steps" if delay is None else f"delay {delay} step(s)"),
         [
             ("fall rate", f"{result.fall_rate:.3f}"),
+            ("heading lost (> 90 deg)", f"{result.heading_loss_rate:.3f}"),
+            ("median |heading change| (deg)", f"{result.median_heading_change_deg:.1f}"),
             ("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}"),
             ("forward speed (m/s)", f"{result.forward_speed:.3f}"),
             ("reference speed (m/s)", f"{result.reference_speed:.3f}"),

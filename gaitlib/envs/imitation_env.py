@@ -1,7 +1,8 @@
 """The motion-imitation environment: an rsl-rl ``VecEnv`` of N A1 worlds, each imitating a gait's reference clip.
 
 One control step (30 Hz): the action (N, 12) is a residual around the reference pose one step ahead; with action
-noise it becomes the PD targets (clipped to the joint limits); pushes are applied; the backend advances 8 physics
+noise it becomes the PD targets (clipped to the joint limits), which reach the servos after each world's action
+delay (0 or more control steps, randomized); pushes are applied; the backend advances 8 physics
 substeps; the phase advances; reward, terminations and time-outs are computed; finished worlds are reset by
 reference state initialization (a random phase, the reference's state, freshly randomized dynamics); observations
 are built with latency and noise. See :mod:`gaitlib.envs.observations` for the layout.
@@ -57,6 +58,8 @@ class EnvConfig:
     """Random trunk pushes (off by default)."""
     random_start_phase: bool = True
     """Reference state initialization at a uniformly random phase (else at phase 0)."""
+    observation: obs_fn.ObservationConfig = field(default_factory=obs_fn.ObservationConfig)
+    """Options of the actor observation (they must be those the policies were trained with)."""
 
 
 class ImitationEnv(VecEnv):
@@ -89,6 +92,8 @@ class ImitationEnv(VecEnv):
         self._lower = torch.tensor(backend.robot.joint_lower, device=dev)
         self._upper = torch.tensor(backend.robot.joint_upper, device=dev)
         self._action = torch.zeros(n, j, device=dev)  # last action taken (after clipping), action units
+        delays = cfg.randomization.action_delay_steps[1] + 1 if cfg.randomization.enabled else 1
+        self._targets = torch.zeros(n, delays, j, device=dev)  # PD targets of the last steps, newest first, rad
         self._history = torch.zeros(n, obs_fn.HISTORY, obs_fn.FRAME_DIM, device=dev)  # observed frames
         self._last_reading = torch.zeros(n, obs_fn.FRAME_DIM, device=dev)  # clean frame of the previous step
         self._params = sample_world_parameters(cfg.randomization, n, self._gen)
@@ -110,7 +115,10 @@ class ImitationEnv(VecEnv):
         noise = self._noise(actions.shape, cfg.randomization.action_noise)
         ahead = self.reference.frame(self.dt)
         targets = ahead.joint_pos + cfg.action_scale * actions + noise
-        self.backend.set_pd_targets(torch.maximum(torch.minimum(targets, self._upper), self._lower))
+        clipped = torch.maximum(torch.minimum(targets, self._upper), self._lower)
+        self._targets = torch.cat([clipped.unsqueeze(1), self._targets[:, :-1]], dim=1)
+        delay = self._params.action_delay.to(self.device).long()
+        self.backend.set_pd_targets(self._targets[torch.arange(self.num_envs, device=self.device), delay])
 
         changed = self._pushes.advance()
         if len(changed):
@@ -186,6 +194,10 @@ class ImitationEnv(VecEnv):
         )
         return self._observations(preview, rows)
 
+    def set_push_max(self, force: float) -> None:
+        """Draw the magnitudes of pushes that start from now on up to ``force``, N (a training curriculum)."""
+        self._pushes.set_max_force(force)
+
     @property
     def push_force(self) -> torch.Tensor:
         """(N, 3) the push force currently applied to each trunk, world frame, N."""
@@ -215,6 +227,7 @@ class ImitationEnv(VecEnv):
         ref = self.reference.frame(world_ids=world_ids)
         self._randomize(world_ids)
         self.backend.reset(world_ids, ref)
+        self._targets[world_ids] = ref.joint_pos.unsqueeze(1)  # a delayed action's servo holds the start pose
         self._pushes.reset(world_ids.cpu())
         self.episode_length_buf[world_ids] = 0
         self._action[world_ids] = 0.0
@@ -267,8 +280,11 @@ class ImitationEnv(VecEnv):
         reference = reference or self.reference
         ids = slice(None) if rows is None else rows
         frames = [reference.frame(k * self.dt) for k in obs_fn.REFERENCE_OFFSETS]
-        actor = torch.cat([self._history[ids].flatten(1), obs_fn.reference_features(frames)], dim=-1)
         s = self._state
+        parts = [self._history[ids].flatten(1), obs_fn.reference_features(frames)]
+        if self.cfg.observation.heading:
+            parts.append(obs_fn.heading_error(s.root_quat[ids], reference.frame().root_quat))
+        actor = torch.cat(parts, dim=-1)
         privileged = obs_fn.privileged_features(
             s.root_quat[ids],
             s.root_lin_vel[ids],

@@ -8,6 +8,9 @@ Actor observation (158) = state s_t (102) + reference g_t (56):
   trunk frame (rad/s), foot contacts (0/1) and the previous actions.
 * g_t: the :data:`REFERENCE_FRAME` (14) at :data:`REFERENCE_OFFSETS` control steps ahead (t+1, t+2, t+10, t+30:
   about one second): joint angles (rad), trunk height (m) and forward speed in the heading frame (m/s).
+* with :attr:`ObservationConfig.heading` (the default), one more value, :data:`HEADING`: the reference trunk's yaw
+  minus the robot's, rad (159 in all). Without it the layout is the 158 values of gaitlib 0.1's libraries, which
+  still load.
 
 Critic (privileged) extras, :data:`PRIVILEGED` (14): trunk linear velocity in the trunk frame, trunk height, gait
 phase as sin/cos, the world's randomized :data:`DYNAMICS` (gravity scale, mass scale, friction, kp in units of the
@@ -16,19 +19,21 @@ robot's default stiffness, kd) and the push force in units of 100 N.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch
 
 from gaitlib.envs.reference import ReferenceFrame
 from gaitlib.robots.a1.constants import KP_DEFAULT, NUM_JOINTS, NUM_LEGS
-from gaitlib.rotations import quat_rotate_inverse
+from gaitlib.rotations import quat_rotate_inverse, yaw_of
 
 __all__ = [
     "ACTOR_OBS_DIM",
     "DYNAMICS",
     "FRAME",
     "FRAME_DIM",
+    "HEADING",
     "HISTORY",
     "PRIVILEGED",
     "PRIVILEGED_DIM",
@@ -38,7 +43,10 @@ __all__ = [
     "SENSED",
     "STATE_DIM",
     "Field",
+    "ObservationConfig",
+    "heading_error",
     "layout",
+    "observation_config",
     "privileged_features",
     "proprioceptive_frame",
     "reference_features",
@@ -90,6 +98,10 @@ REFERENCE_OFFSETS = (1, 2, 10, 30)
 """Control steps ahead at which the reference is shown to the policy."""
 REFERENCE_DIM = width(REFERENCE_FRAME) * len(REFERENCE_OFFSETS)  # 56
 ACTOR_OBS_DIM = STATE_DIM + REFERENCE_DIM  # 158
+"""State and reference: the actor observation without :data:`HEADING`."""
+HEADING: tuple[Field, ...] = (Field("heading_error", 1),)
+"""The heading error after the reference, when :attr:`ObservationConfig.heading`: without it the heading is
+unobservable (gravity and angular velocity do not hold it), so no policy can hold a heading."""
 DYNAMICS: tuple[Field, ...] = (
     Field("gravity_scale", 1),
     Field("mass_scale", 1),
@@ -110,16 +122,41 @@ PRIVILEGED: tuple[Field, ...] = (
 PRIVILEGED_DIM = width(PRIVILEGED)  # 14
 
 
-def layout() -> dict[str, object]:
+@dataclass(frozen=True, kw_only=True)
+class ObservationConfig:
+    """The options of the actor observation; every policy of a library shares them."""
+
+    heading: bool = True
+    """End the actor observation with :data:`HEADING` (159 values); ``False`` is gaitlib 0.1's 158-value layout."""
+
+    @property
+    def actor_dim(self) -> int:
+        """Width of the actor observation."""
+        return ACTOR_OBS_DIM + (width(HEADING) if self.heading else 0)
+
+
+def layout(cfg: ObservationConfig = ObservationConfig()) -> dict[str, object]:
     """A description of the observation layout, stored with every trained policy and checked on load."""
-    return {
+    described: dict[str, object] = {
         "frame": [f"{f.name}:{f.width}" for f in FRAME],
         "history": HISTORY,
         "reference_offsets": list(REFERENCE_OFFSETS),
         "reference_frame": [f"{f.name}:{f.width}" for f in REFERENCE_FRAME],
-        "actor_dim": ACTOR_OBS_DIM,
+        "actor_dim": cfg.actor_dim,
         "privileged_dim": PRIVILEGED_DIM,
     }
+    if cfg.heading:
+        described["heading"] = [f"{f.name}:{f.width}" for f in HEADING]
+    return described
+
+
+def observation_config(described: object) -> ObservationConfig | None:
+    """The options whose :func:`layout` is ``described`` (as stored with a policy); ``None`` if no options of this
+    gaitlib give it."""
+    for cfg in (ObservationConfig(heading=True), ObservationConfig(heading=False)):
+        if described == layout(cfg):
+            return cfg
+    return None
 
 
 def proprioceptive_frame(
@@ -150,6 +187,13 @@ def reference_features(frames: list[ReferenceFrame]) -> torch.Tensor:
         for f in frames
     ]
     return torch.cat([_assemble(REFERENCE_FRAME, p) for p in parts], dim=-1)
+
+
+def heading_error(root_quat: torch.Tensor, ref_root_quat: torch.Tensor) -> torch.Tensor:
+    """(N, 1) yaw of the reference trunk ``ref_root_quat`` (N, 4) minus yaw of the trunk ``root_quat`` (N, 4), wrapped
+    to [-pi, pi), rad: positive when the robot must turn left to face the reference's way."""
+    error = yaw_of(ref_root_quat) - yaw_of(root_quat)
+    return (torch.remainder(error + torch.pi, 2 * torch.pi) - torch.pi).unsqueeze(-1)
 
 
 def privileged_features(

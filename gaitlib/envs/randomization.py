@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -24,6 +24,9 @@ class RandomizationConfig:
     mass_scale: tuple[float, float] = (0.85, 1.15)  # Table 1: rigid body mass, x nominal
     friction: tuple[float, float] = (0.25, 1.5)  # Table 1: ground friction coefficient
     latency: tuple[float, float] = (0.0, 0.020)  # Table 1: observation latency, s
+    # Beyond Table 1: whole control steps (33 ms each) an action waits before the servos get it. The paper
+    # randomizes latency; a policy on the robot acts on readings a step old, and must survive it.
+    action_delay_steps: tuple[int, int] = (0, 1)
     kp: tuple[float, float] = KP_RANGE  # Table 1: PD stiffness, N m/rad
     kd: tuple[float, float] = KD_RANGE  # Table 1: PD damping, N m s/rad
     nominal_friction: float = FOOT_FRICTION  # the model's own friction, used when randomization is off
@@ -38,6 +41,8 @@ class WorldParameters:
     friction: torch.Tensor
     latency: torch.Tensor
     """Observation latency, s."""
+    action_delay: torch.Tensor
+    """Control steps each action waits before it reaches the PD servos (a whole number stored as a float)."""
     kp: torch.Tensor
     """PD stiffness applied to every joint, N m/rad."""
     kd: torch.Tensor
@@ -57,6 +62,7 @@ def sample_world_parameters(cfg: RandomizationConfig, k: int, generator: torch.G
             mass_scale=torch.ones(k),
             friction=torch.full((k,), cfg.nominal_friction),
             latency=torch.zeros(k),
+            action_delay=torch.zeros(k),
             kp=torch.full((k,), KP_DEFAULT),
             kd=torch.full((k,), KD_DEFAULT),
         )
@@ -65,6 +71,9 @@ def sample_world_parameters(cfg: RandomizationConfig, k: int, generator: torch.G
         mass_scale=_uniform(cfg.mass_scale, k, generator),
         friction=_uniform(cfg.friction, k, generator),
         latency=_uniform(cfg.latency, k, generator),
+        action_delay=torch.randint(
+            cfg.action_delay_steps[0], cfg.action_delay_steps[1] + 1, (k,), generator=generator
+        ).float(),
         kp=_uniform(cfg.kp, k, generator),
         kd=_uniform(cfg.kd, k, generator),
     )
@@ -113,6 +122,10 @@ class PushSchedule:
         self.enabled[world_ids] = enabled
         if enabled:
             self.reset(world_ids)
+
+    def set_max_force(self, force: float) -> None:
+        """Draw the magnitudes of pushes that start from now on up to ``force``, N (a training curriculum)."""
+        self.cfg = replace(self.cfg, max_force=force)
 
     def _steps(self, bounds: tuple[float, float], k: int) -> torch.Tensor:
         return torch.round(_uniform(bounds, k, self._gen) / self._dt).long().clamp(min=1)

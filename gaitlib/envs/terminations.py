@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
 
-from gaitlib.rotations import quat_angle_between
+from gaitlib.rotations import quat_angle_between, quat_rotate
 
 __all__ = ["TerminationConfig", "fallen", "orientation_lost", "too_low"]
 
@@ -19,6 +20,9 @@ class TerminationConfig:
     """Trunk height below which the robot has fallen, m (it stands at about 0.25 m)."""
     max_orientation_error: float = torch.pi / 2
     """Largest rotation between the trunk and the reference trunk, rad."""
+    heading: bool = True
+    """The rotation compared includes the heading (training: a policy that turns away fails); ``False``: only the
+    tilt, the angle between the trunk's up axis and the reference trunk's (a fall, as evaluation counts it)."""
 
 
 def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:
@@ -26,9 +30,17 @@ def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:
     return root_height < min_height
 
 
-def orientation_lost(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, *, max_error: float) -> torch.Tensor:
-    """The trunk is rotated more than ``max_error`` rad away from the reference trunk."""
-    return quat_angle_between(root_quat, ref_root_quat) > max_error
+def orientation_lost(
+    root_quat: torch.Tensor, ref_root_quat: torch.Tensor, *, max_error: float, heading: bool = True
+) -> torch.Tensor:
+    """The trunk is rotated more than ``max_error`` rad away from the reference trunk (``heading=False``: its up
+    axis is tilted more than ``max_error`` away from the reference trunk's)."""
+    if heading:
+        return quat_angle_between(root_quat, ref_root_quat) > max_error
+    up = torch.zeros_like(root_quat[:, 1:])
+    up[:, 2] = 1.0
+    cosine = (quat_rotate(root_quat, up) * quat_rotate(ref_root_quat, up)).sum(-1)
+    return cosine < math.cos(max_error)
 
 
 def fallen(
@@ -42,5 +54,5 @@ def fallen(
     return (
         body_contact
         | too_low(root_height, min_height=cfg.min_height)
-        | orientation_lost(root_quat, ref_root_quat, max_error=cfg.max_orientation_error)
+        | orientation_lost(root_quat, ref_root_quat, max_error=cfg.max_orientation_error, heading=cfg.heading)
     )

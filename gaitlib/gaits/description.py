@@ -40,7 +40,7 @@ class GaitDescription:
     """
 
     name: str
-    """Registry name, e.g. ``"trot"``."""
+    """Registry name, e.g. ``"trot"`` or ``"trot_slow"``; no ``-``, ``,`` or spaces (``--pairs trot-stand``)."""
     phase_offsets: tuple[float, float, float, float]
     """Touchdown phase of each leg in leg order FR, FL, RR, RL, cycles in [0, 1): the foot lands at that phase
     and stays on the ground for ``duty_factor`` of a cycle."""
@@ -65,6 +65,8 @@ class GaitDescription:
 
         if not isinstance(self.name, str) or not self.name:
             raise GaitError(f"gait name must be a non-empty string, got {self.name!r}")
+        if set(self.name) & set("-, "):
+            raise GaitError(f"gait name {self.name!r} may not hold '-', ',' or spaces (they separate gaits in pairs)")
         for field in (
             "duty_factor",
             "stride_frequency",

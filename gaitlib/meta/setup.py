@@ -39,10 +39,10 @@ class SwitchingSetup:
         return self.gaits.index(name)
 
     def make_env(self, sim: SimBackend, cfg: EnvConfig | None = None, *, seed: int = 0) -> ImitationEnv:
-        """An environment of every gait on ``sim``, with the policies' action settings (``cfg`` for the rest)."""
-        _, action = self.resources.library.shared_policy_settings(self.gaits)
-        cfg = dataclasses.replace(cfg or EnvConfig(), action_scale=action["scale"], action_clip=action["clip"])
-        return ImitationEnv(sim, [e.clip for e in self.entries], cfg, seed=seed)
+        """An environment of every gait on ``sim``, with the policies' action and observation settings (``cfg`` for
+        the rest)."""
+        settings = self.resources.library.shared_policy_settings(self.gaits)
+        return ImitationEnv(sim, [e.clip for e in self.entries], settings.env_config(cfg or EnvConfig()), seed=seed)
 
     def controller(
         self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0
@@ -64,5 +64,5 @@ def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
     names = lib.gaits()
     if len(names) < 2:
         raise GaitlibError(f"library {lib.root} holds {len(names)} gait(s); switching needs at least two")
-    lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed action settings now
+    lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed action or observation settings now
     return SwitchingSetup(lib.entries(names), SwitchResources(library=lib, gaits=names))

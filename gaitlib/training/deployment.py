@@ -20,6 +20,7 @@ from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.reference import ReferenceTracker
 from gaitlib.gaits import ReferenceClip
 from gaitlib.robots import RobotSpec, get_robot
+from gaitlib.rotations import yaw_of
 
 __all__ = ["deployment_block"]
 
@@ -43,13 +44,19 @@ _SEGMENTS = {
 
 
 def deployment_block(
-    *, clip: ReferenceClip, action: Mapping[str, object], onnx_path: Path, robot: str = "a1"
+    *,
+    clip: ReferenceClip,
+    action: Mapping[str, object],
+    observation: obs_fn.ObservationConfig,
+    onnx_path: Path,
+    robot: str = "a1",
 ) -> dict:
     """The ``deployment`` block of a library entry (see the module docstring and ``docs/deploying.md``).
 
     Args:
         clip: the reference clip the policy was trained to imitate.
         action: the entry's action settings: ``type``, ``scale`` (rad per action unit), ``clip`` (action units).
+        observation: the options of the observations the policy reads.
         onnx_path: the exported policy (read for its input and output names and shapes).
         robot: the registered robot the policy drives.
     """
@@ -65,8 +72,8 @@ def deployment_block(
             "pd_target": "clip(reference_joint_pos(phase + phase_per_step) + scale * clip(action, -clip, clip), "
             "joint_lower, joint_upper): the reference one control step ahead plus the scaled clipped action",
         },
-        "observation": _observation_facts(),
-        "reference": _reference_facts(clip, control_dt),
+        "observation": _observation_facts(observation),
+        "reference": _reference_facts(clip, control_dt, observation),
         "onnx": _onnx_facts(onnx_path),
     }
 
@@ -100,7 +107,7 @@ def _control_facts(spec: RobotSpec) -> dict:
     }
 
 
-def _observation_facts() -> dict:
+def _observation_facts(cfg: obs_fn.ObservationConfig) -> dict:
     frame = _segments(obs_fn.FRAME)
     size = {s["name"]: s["size"] for s in frame}
     frame_size = obs_fn.FRAME_DIM
@@ -113,11 +120,11 @@ def _observation_facts() -> dict:
     )[0]
     gravity = next(s for s in frame if s["name"] == "projected_gravity")
     history = obs_fn.HISTORY
-    return {
-        "size": obs_fn.ACTOR_OBS_DIM,
+    facts = {
+        "size": cfg.actor_dim,
         "dtype": "float32",
         "order": f"{history} proprioceptive frames of frame_size values (the state, {history * frame_size} "
-        "values), then the reference (see reference)",
+        "values), then the reference (see reference)" + (", then the heading error (see heading)" if cfg.heading else ""),
         "frame_size": frame_size,
         "frame": frame,
         "history": {
@@ -135,17 +142,28 @@ def _observation_facts() -> dict:
             "upright_value": upright[gravity["start"] : gravity["start"] + gravity["size"]].tolist(),
         },
     }
+    if cfg.heading:
+        facts["heading"] = {
+            "start": obs_fn.ACTOR_OBS_DIM,
+            "size": obs_fn.width(obs_fn.HEADING),
+            "meaning": "heading error: wrap(start_yaw + reference yaw(phase) - yaw) to [-pi, pi), rad, where yaw is "
+            "the trunk's yaw (rotation about world z) now, start_yaw the trunk's yaw when the policy started, and "
+            "reference yaw(phase) the reference table's yaw column",
+            "units": "rad",
+        }
+    return facts
 
 
-def _reference_facts(clip: ReferenceClip, control_dt: float) -> dict:
+def _reference_facts(clip: ReferenceClip, control_dt: float, cfg: obs_fn.ObservationConfig) -> dict:
     count = clip.num_frames
     identity = torch.zeros(count, 4)
     identity[:, 0] = 1.0
     tracker = ReferenceTracker([clip], count, torch.device("cpu"))
     phases = torch.arange(count) / (count - 1)
     tracker.start(torch.arange(count), torch.zeros(count, dtype=torch.long), phases, torch.zeros(count, 3), identity)
-    rows = obs_fn.reference_features([tracker.frame()]).double().numpy().round(_DECIMALS)
-    return {
+    frame = tracker.frame()
+    rows = obs_fn.reference_features([frame]).double().numpy().round(_DECIMALS)
+    facts = {
         "start": obs_fn.STATE_DIM,
         "offsets_steps": list(obs_fn.REFERENCE_OFFSETS),
         "phase": "phase counts reference cycles from 0 (or from the phase chosen) when the policy starts and grows "
@@ -159,6 +177,9 @@ def _reference_facts(clip: ReferenceClip, control_dt: float) -> dict:
         "columns": _segments(obs_fn.REFERENCE_FRAME),
         "rows": rows.tolist(),
     }
+    if cfg.heading:  # the reference trunk's own yaw at each row, rad (0 for a gait built from a description)
+        facts["yaw"] = yaw_of(frame.root_quat).double().numpy().round(_DECIMALS).tolist()
+    return facts
 
 
 def _segments(fields: tuple[obs_fn.Field, ...]) -> list[dict]:

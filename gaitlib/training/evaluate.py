@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import torch
 
@@ -25,7 +25,13 @@ class EvalResult:
     seconds: float
     """Episode length asked for, s."""
     fall_rate: float
-    """Fraction of episodes that ended in a termination (a fall) before ``seconds``, 0-1."""
+    """Fraction of episodes that ended in a fall before ``seconds``, 0-1: a non-foot body touched the ground, the
+    trunk sank too low, or it tilted more than 90 degrees (turning away is not a fall: see ``heading_loss_rate``)."""
+    heading_loss_rate: float
+    """Fraction of episodes in which the robot, still up, turned more than 90 degrees away from its starting
+    heading at some moment, 0-1."""
+    median_heading_change_deg: float
+    """Median over episodes of the absolute heading change from start to end (or to the fall), degrees."""
     joint_rmse: float
     """Root-mean-square joint angle error against the reference over all alive steps, rad."""
     forward_speed: float
@@ -38,6 +44,8 @@ class EvalResult:
     """Mean time alive per episode, s."""
     push_force: float
     """Largest push magnitude applied, N (0: no pushes)."""
+    action_delay_steps: int | None
+    """Control steps every action waited (``None``: the randomized delay of training)."""
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -47,25 +55,43 @@ def evaluate_policy(
     policy: GaitPolicy,
     clip: ReferenceClip,
     *,
-    action_scale: float,
+    env_cfg: EnvConfig,
     episodes: int,
     seconds: float,
     backend: str = "auto",
     push_force: float = 0.0,
+    action_delay_steps: int | None = None,
     seed: int = 0,
 ) -> EvalResult:
-    """Run ``episodes`` worlds for ``seconds`` s each with the deterministic policy and Table 1 randomization."""
+    """Run ``episodes`` worlds for ``seconds`` s each with the deterministic policy and Table 1 randomization.
+
+    ``env_cfg`` holds the policy's action and observation settings; its episode length, pushes and terminations
+    are set here. ``action_delay_steps`` fixes the control steps every action waits (``None``: the randomized
+    delay of training).
+    """
+    randomization = env_cfg.randomization
+    if action_delay_steps is not None:
+        randomization = replace(randomization, action_delay_steps=(action_delay_steps, action_delay_steps))
+    cfg = replace(
+        env_cfg,
+        episode_seconds=seconds,
+        pushes=PushConfig(max_force=push_force),
+        termination=replace(env_cfg.termination, heading=False),
+        randomization=randomization,
+    )
     sim = make_backend(backend, num_worlds=episodes)
     try:
-        cfg = EnvConfig(episode_seconds=seconds, action_scale=action_scale, pushes=PushConfig(max_force=push_force))
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
         n, steps = env.num_envs, env.max_episode_length
         alive = torch.ones(n, dtype=torch.bool, device=env.device)
         fell = torch.zeros(n, dtype=torch.bool, device=env.device)
+        turned = torch.zeros(n, dtype=torch.bool, device=env.device)
         alive_steps = torch.zeros(n, device=env.device)
         sq_error = torch.zeros(n, device=env.device)
         speed = torch.zeros(n, device=env.device)
         ref_speed = torch.zeros(n, device=env.device)
+        start_yaw = yaw_of(env.sim_state.root_quat)
+        heading_change = torch.zeros(n, device=env.device)
         obs = env.get_observations()
         for _ in range(steps):
             obs, _, dones, extras = env.step(policy.act(obs))
@@ -75,7 +101,11 @@ def evaluate_policy(
             fell |= ended & ~extras["time_outs"]
             alive &= ~dones
             live = alive.float()
-            heading = quat_from_yaw(yaw_of(s.root_quat))
+            yaw = yaw_of(s.root_quat)
+            change = torch.remainder(yaw - start_yaw + torch.pi, 2 * torch.pi) - torch.pi
+            heading_change = torch.where(alive, change.abs(), heading_change)
+            turned |= alive & (change.abs() > torch.pi / 2)
+            heading = quat_from_yaw(yaw)
             sq_error += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
             speed += live * quat_rotate_inverse(heading, s.root_lin_vel)[:, 0]
             ref_speed += live * ref.heading_lin_vel[:, 0]
@@ -89,12 +119,15 @@ def evaluate_policy(
             episodes=n,
             seconds=seconds,
             fall_rate=float(fell.float().mean()),
+            heading_loss_rate=float(turned.float().mean()),
+            median_heading_change_deg=float(torch.rad2deg(heading_change).median()),
             joint_rmse=float(torch.sqrt(sq_error.sum() / total_alive)),
             forward_speed=mean_speed,
             reference_speed=mean_ref,
             speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
             mean_episode_seconds=float((counted * env.dt).mean()),
             push_force=push_force,
+            action_delay_steps=action_delay_steps,
         )
     finally:
         sim.close()

@@ -12,7 +12,7 @@ __all__ = ["export_onnx"]
 
 def export_onnx(actor: torch.nn.Module, path: Path) -> None:
     """Export the deterministic actor (normalizer included) with rsl-rl's ONNX wrapper; the first axis of input
-    ``obs`` (N, 158) and output ``actions`` (N, 12) is the batch, of any size N."""
+    ``obs`` (N, actor observation width) and output ``actions`` (N, 12) is the batch, of any size N."""
     model = actor.as_onnx(verbose=False).to("cpu").eval()
     with warnings.catch_warnings():
         # The TorchScript exporter is chosen on purpose (an MLP needs nothing of torch.export, which pulls in

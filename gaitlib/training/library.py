@@ -36,6 +36,7 @@ from pathlib import Path
 
 import torch
 
+from gaitlib.envs import EnvConfig
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
@@ -50,6 +51,7 @@ __all__ = [
     "Library",
     "LibraryEntry",
     "LibraryError",
+    "PolicySettings",
     "check_identities",
     "default_library_dir",
     "gait_order",
@@ -98,6 +100,44 @@ class LibraryEntry:
     def action_clip(self) -> float:
         """Actions are clipped to [-action_clip, action_clip] action units before use."""
         return float(self.action["clip"])
+
+    @property
+    def action_delay_steps(self) -> tuple[int, int]:
+        """The range of action delays the policy was trained with, control steps (entries of gaitlib 0.1, which
+        trained without a delay, record none: (0, 0))."""
+        low, high = self.metadata["training"].get("randomization", {}).get("action_delay_steps", (0, 0))
+        return int(low), int(high)
+
+    @property
+    def observation(self) -> obs_fn.ObservationConfig:
+        """The options of the observations the policy reads (from the layout in its metadata)."""
+        cfg = obs_fn.observation_config(self.metadata["observation"])
+        assert cfg is not None  # _load_entry refuses any other layout
+        return cfg
+
+
+@dataclass(frozen=True)
+class PolicySettings:
+    """What the policies that drive one environment and fill one transition file must share."""
+
+    latent_dim: int
+    """Size of the actors' last hidden layer."""
+    action: dict
+    """``type``, ``scale`` (rad per action unit) and ``clip`` (action units)."""
+    observation: obs_fn.ObservationConfig
+    """Options of the actor observation."""
+    action_delay_steps: tuple[int, int]
+    """Range of the action delay the policies were trained with, control steps: they run with it."""
+
+    def env_config(self, cfg: EnvConfig) -> EnvConfig:
+        """``cfg`` with the policies' action and observation settings and their trained action delay."""
+        return dataclasses.replace(
+            cfg,
+            action_scale=self.action["scale"],
+            action_clip=self.action["clip"],
+            observation=self.observation,
+            randomization=dataclasses.replace(cfg.randomization, action_delay_steps=self.action_delay_steps),
+        )
 
 
 def default_library_dir() -> Path:
@@ -233,9 +273,9 @@ class Library:
         known = self.gaits()
         check_identities(recorded, self.identities(g for g in recorded if g in known), what=what)
 
-    def shared_policy_settings(self, names: Iterable[str] | None = None) -> tuple[int, dict]:
-        """The latent size and action settings (``type``, ``scale``, ``clip``) that the entries of ``names`` share:
-        policies that drive one environment and fill one transition file must agree on them."""
+    def shared_policy_settings(self, names: Iterable[str] | None = None) -> PolicySettings:
+        """The latent size, action settings, observation options and action delay that the entries of ``names``
+        share: policies that drive one environment and fill one transition file must agree on them."""
         entries = self.entries(names)
         latent = {e.name: e.policy.latent_dim for e in entries}
         if len(set(latent.values())) != 1:
@@ -243,8 +283,24 @@ class Library:
         actions = {e.name: (e.action["type"], e.action_scale, e.action_clip) for e in entries}
         if len(set(actions.values())) != 1:
             raise LibraryError(f"library policies use different action settings {actions}; retrain them alike")
+        observations = {e.name: e.observation for e in entries}
+        if len(set(observations.values())) != 1:
+            heading = {name: cfg.heading for name, cfg in observations.items()}
+            raise LibraryError(
+                f"library policies read different observations (heading error shown: {heading}); retrain them alike"
+            )
+        delays = {e.name: e.action_delay_steps for e in entries}
+        if len(set(delays.values())) != 1:
+            raise LibraryError(
+                f"library policies were trained with different action delays {delays}; retrain them alike"
+            )
         kind, scale, clip = next(iter(actions.values()))
-        return next(iter(latent.values())), {"type": kind, "scale": scale, "clip": clip}
+        return PolicySettings(
+            latent_dim=next(iter(latent.values())),
+            action={"type": kind, "scale": scale, "clip": clip},
+            observation=next(iter(observations.values())),
+            action_delay_steps=next(iter(delays.values())),
+        )
 
     def save_entry(
         self,
@@ -254,12 +310,14 @@ class Library:
         critic: torch.nn.Module,
         networks: dict,
         action: dict,
+        observation: obs_fn.ObservationConfig,
         training: dict,
         evaluation: dict,
     ) -> Path:
         """Write ``<root>/<gait>/`` atomically (into a temporary folder, then renamed over the old entry).
 
         ``networks``: ``actor_hidden``, ``critic_hidden``, ``activation``; ``action``: ``type``, ``scale``, ``clip``;
+        ``observation``: the options of the observations the policy was trained on;
         ``training`` and ``evaluation``: free-form records of how the policy was made and how good it is.
         """
         self._entries.pop(description.name, None)
@@ -272,7 +330,7 @@ class Library:
                 "gait": description.name,
                 "description": dataclasses.asdict(description),
                 "robot": "a1",
-                "observation": obs_fn.layout(),
+                "observation": obs_fn.layout(observation),
                 "action": action,
                 "networks": networks,
                 "training": training,
@@ -280,7 +338,10 @@ class Library:
                 "versions": _versions(),
                 "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
                 "deployment": deployment_block(
-                    clip=clip_from_description(description), action=action, onnx_path=staging / "policy.onnx"
+                    clip=clip_from_description(description),
+                    action=action,
+                    observation=observation,
+                    onnx_path=staging / "policy.onnx",
                 ),
             }
             (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
@@ -302,7 +363,8 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
             f"library entry '{name}' has format version {version}, this gaitlib reads version {FORMAT_VERSION}; "
             "retrain it with this gaitlib"
         )
-    if metadata.get("observation") != obs_fn.layout():
+    observation = obs_fn.observation_config(metadata.get("observation"))
+    if observation is None:
         raise LibraryError(
             f"library entry '{name}' was trained with another observation layout; retrain it with this gaitlib"
         )
@@ -319,6 +381,7 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
             critic_hidden=tuple(nets["critic_hidden"]),
             activation=nets["activation"],
             num_actions=get_robot(metadata.get("robot", "a1")).num_joints,
+            observation=observation,
         )
         actor.load_state_dict(state["actor"])
         critic.load_state_dict(state["critic"])

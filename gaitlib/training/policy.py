@@ -20,10 +20,10 @@ __all__ = ["GaitPolicy", "build_models", "per_gait"]
 OBS_GROUPS = {"actor": ["policy"], "critic": ["policy", "privileged"]}
 
 
-def _dummy_obs() -> TensorDict:
+def _dummy_obs(actor_dim: int) -> TensorDict:
     return TensorDict(
         {
-            "policy": torch.zeros(1, obs_fn.ACTOR_OBS_DIM),
+            "policy": torch.zeros(1, actor_dim),
             "privileged": torch.zeros(1, obs_fn.PRIVILEGED_DIM),
         },
         batch_size=[1],
@@ -31,10 +31,16 @@ def _dummy_obs() -> TensorDict:
 
 
 def build_models(
-    *, actor_hidden: tuple[int, ...], critic_hidden: tuple[int, ...], activation: str, num_actions: int
+    *,
+    actor_hidden: tuple[int, ...],
+    critic_hidden: tuple[int, ...],
+    activation: str,
+    num_actions: int,
+    observation: obs_fn.ObservationConfig,
 ) -> tuple[MLPModel, MLPModel]:
-    """Fresh (untrained) actor and critic of the given sizes, laid out as in :func:`rsl_rl_config`."""
-    obs = _dummy_obs()
+    """Fresh (untrained) actor and critic of the given sizes, laid out as in :func:`rsl_rl_config`, for actor
+    observations of the options ``observation``."""
+    obs = _dummy_obs(observation.actor_dim)
     actor = MLPModel(
         obs,
         OBS_GROUPS,

@@ -213,6 +213,7 @@ class GaitRunner(OnPolicyRunner):
         """One rsl-rl iteration (rollout, returns, PPO update); its statistics, also added to the curve."""
         log = self.logger
         log.clear()
+        self.env.set_push_max(self.request.preset.push_max(self.current_learning_iteration))
         super().learn(1)  # leaves current_learning_iteration at this iteration's index
         self.current_learning_iteration += 1
         step_samples = self.env.num_envs * log.steps
@@ -267,7 +268,7 @@ def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats]
     preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
-    env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=preset.push_force))
+    env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=preset.push_max(0)))
     sim = make_backend(backend_name, num_worlds=preset.num_envs)
     try:
         runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=request.seed), request)
@@ -286,7 +287,7 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
     evaluation = evaluate_policy(
         GaitPolicy(alg.get_policy(), alg.critic),
         clip,
-        action_scale=env_cfg.action_scale,
+        env_cfg=env_cfg,
         episodes=request.eval_episodes,
         seconds=request.eval_seconds,
         backend=backend_name,
@@ -302,6 +303,7 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
             "activation": preset.activation,
         },
         action={"type": "residual_to_reference", "scale": env_cfg.action_scale, "clip": env_cfg.action_clip},
+        observation=env_cfg.observation,
         training={
             "preset": dataclasses.asdict(preset),
             "backend": backend_name,
@@ -309,7 +311,9 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
             "samples": runner.samples,
             "wall_clock_s": round(runner.elapsed, 1),
             "seed": request.seed,
-            "push_force_max_n": preset.push_force,
+            "push_force_max_n": preset.push_max(runner.current_learning_iteration),
+            "push_ramp_iterations": preset.push_ramp_iterations,
+            "randomization": dataclasses.asdict(env_cfg.randomization),
             "episode_seconds": preset.episode_seconds,
             "curve": {
                 "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],

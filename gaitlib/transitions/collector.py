@@ -45,10 +45,11 @@ import numpy as np
 import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig, RandomizationConfig
+from gaitlib.envs import observations as obs_fn
+from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.sim import make_backend, resolve_backend_name
-from gaitlib.training.library import Library
+from gaitlib.training.library import Library, PolicySettings
 from gaitlib.transitions import schema
 from gaitlib.transitions.cycle import SwitchCycles
 from gaitlib.transitions.writer import open_writer
@@ -159,24 +160,24 @@ def collect(
     cfg, output = config, Path(output)
     names = library.order(gaits)
     pairs = _check(cfg, names)
-    header = _header(library, names, pairs, cfg)
+    shared = library.shared_policy_settings(names)
+    header = _header(library, names, pairs, cfg, shared)
     with open_writer(output, header=header) as target:
         counts = _pair_counts(target.committed, len(names))
         if target.count >= cfg.samples:
             return CollectResult(output, target.count, 0, 0.0, 0.0, _named(counts, names), 0, 0.0, target.note)
         sim = make_backend(header.settings["backend"], num_worlds=cfg.num_worlds, device=cfg.device)
         try:
-            run = _start_run(target, sim, library.entries(names), header, pairs, counts, cfg)
+            run = _start_run(target, sim, library.entries(names), shared, header, pairs, counts, cfg)
             return _write_until_done(output, target, run, counts, names, cfg, progress)
         finally:
             sim.close()
 
 
 def _header(
-    library: Library, gaits: tuple[str, ...], pairs: list[tuple[str, str]], cfg: CollectConfig
+    library: Library, gaits: tuple[str, ...], pairs: list[tuple[str, str]], cfg: CollectConfig, shared: PolicySettings
 ) -> schema.TransitionHeader:
     """What the file records of the policies and settings (a resumed run must repeat them)."""
-    latent_dim, action = library.shared_policy_settings(gaits)
     pushes = PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s)
     settings = {
         "horizon_s": cfg.horizon_s,
@@ -191,24 +192,24 @@ def _header(
         "chain": cfg.chain,
         "backend": resolve_backend_name(cfg.backend),
         "seed": cfg.seed,
-        "randomization": dataclasses.asdict(RandomizationConfig()),
-        "action": action,
+        "randomization": dataclasses.asdict(shared.env_config(EnvConfig()).randomization),
+        "action": shared.action,
+        "observation": obs_fn.layout(shared.observation),
     }
     identities = tuple(library.identities(gaits).values())
-    return schema.TransitionHeader(gaits=gaits, identities=identities, latent_dim=latent_dim, settings=settings)
+    return schema.TransitionHeader(gaits=gaits, identities=identities, latent_dim=shared.latent_dim, settings=settings)
 
 
-def _start_run(target, sim, entries, header, pairs, counts, cfg: CollectConfig) -> SwitchCycles:
+def _start_run(target, sim, entries, shared, header, pairs, counts, cfg: CollectConfig) -> SwitchCycles:
     """The environment and the per-world cycles of this run, with random streams derived from the seed and the
     file's next chunk index (so a resumed run draws new numbers); the run is recorded in the file's sessions."""
     count, chunk = target.count, target.next_chunk
     env_seed, draw_seed = (int(s) for s in np.random.SeedSequence([cfg.seed, chunk]).generate_state(2))
-    action = header.settings["action"]
-    env_cfg = EnvConfig(
-        episode_seconds=_EPISODE_SECONDS,
-        action_scale=action["scale"],
-        action_clip=action["clip"],
-        pushes=PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s),
+    env_cfg = shared.env_config(
+        EnvConfig(
+            episode_seconds=_EPISODE_SECONDS,
+            pushes=PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s),
+        )
     )
     env = ImitationEnv(sim, [e.clip for e in entries], env_cfg, seed=env_seed)
     target.record_session(
