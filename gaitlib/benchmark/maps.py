@@ -96,7 +96,7 @@ def transition_maps(data: TransitionData, *, bins: int = 10) -> list[PairMap]:
         with np.errstate(invalid="ignore", divide="ignore"):
             grid = np.where(counts > 0, wins / np.maximum(counts, 1), np.nan)
         feet = contacts[rows]
-        labels = np.array(["+".join(leg for leg, down in zip(LEG_NAMES, f, strict=True) if down) or "none" for f in feet])
+        labels = np.array(["+".join(g for g, down in zip(LEG_NAMES, f, strict=True) if down) or "none" for f in feet])
         falls = s.fall_after[rows][~ok]
         maps.append(
             PairMap(

@@ -60,6 +60,7 @@ def train_command(
     from gaitlib.cli.options import check_worlds
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import default_library_dir, get_preset
+    from gaitlib.training.distributed import Ranks
     from gaitlib.training.trainer import TrainRequest, train_gait
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
@@ -78,6 +79,9 @@ def train_command(
         checkpoint_every=checkpoint_every,
         eval_episodes=eval_episodes,
     )
+    if not Ranks.from_env().main:  # under torchrun, rank 0 alone reports
+        train_gait(request)
+        return
     console = Console(stderr=True)
     with job_progress(console, f"train {gait}") as progress:
         task = progress.add_task("train", total=request.iterations, status="starting")

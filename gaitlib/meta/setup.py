@@ -64,5 +64,5 @@ def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
     names = lib.gaits()
     if len(names) < 2:
         raise GaitlibError(f"library {lib.root} holds {len(names)} gait(s); switching needs at least two")
-    lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed action or observation settings now
+    lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed policy settings now
     return SwitchingSetup(lib.entries(names), SwitchResources(library=lib, gaits=names))

@@ -124,7 +124,8 @@ def _observation_facts(cfg: obs_fn.ObservationConfig) -> dict:
         "size": cfg.actor_dim,
         "dtype": "float32",
         "order": f"{history} proprioceptive frames of frame_size values (the state, {history * frame_size} "
-        "values), then the reference (see reference)" + (", then the heading error (see heading)" if cfg.heading else ""),
+        "values), then the reference (see reference)"
+        + (", then the heading error (see heading)" if cfg.heading else ""),
         "frame_size": frame_size,
         "frame": frame,
         "history": {

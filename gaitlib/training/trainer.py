@@ -19,7 +19,6 @@ from pathlib import Path
 
 import torch
 from rsl_rl.runners import OnPolicyRunner
-from rsl_rl.utils.logger import Logger
 
 from gaitlib.atomic import atomic_path
 from gaitlib.envs import EnvConfig, ImitationEnv
@@ -27,7 +26,9 @@ from gaitlib.envs.randomization import PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.sim import make_backend, resolve_backend_name
+from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_in_sync, rank_device
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
+from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
 from gaitlib.training.library import Library
 from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
@@ -69,28 +70,6 @@ class TrainRequest:
 
 
 @dataclass(frozen=True)
-class IterationStats:
-    """What the progress display shows after each iteration."""
-
-    iteration: int
-    total: int
-    samples: int
-    """Environment steps so far, all worlds."""
-    samples_per_s: float
-    """Throughput of the last iteration (collection and update)."""
-    elapsed: float
-    """Wall-clock training time so far, s (resumed runs included)."""
-    mean_reward: float
-    """Mean per-step reward over the last iteration."""
-    mean_episode_length: float
-    """Mean length of episodes finished in the last iteration, s (NaN if none finished)."""
-    reward_terms: dict[str, float]
-    """Mean of each imitation reward term over the last iteration."""
-    losses: dict[str, float]
-    """PPO losses of the update."""
-
-
-@dataclass(frozen=True)
 class TrainResult:
     """A finished run."""
 
@@ -102,51 +81,6 @@ class TrainResult:
     evaluation: EvalResult
 
 
-class _IterationLog(Logger):
-    """Sums what rsl-rl's ``learn`` reports of one iteration, for :class:`IterationStats`. It takes the place of
-    rsl-rl's ``Logger``, whose ``log`` prints a report to the console (gaitlib prints only in its CLI); with no log
-    folder the base class opens no writer and stores no code state."""
-
-    def __init__(self, runner: OnPolicyRunner) -> None:
-        super().__init__(
-            log_dir=None,
-            cfg=runner.cfg,
-            env_cfg=runner.env.cfg,
-            num_envs=runner.env.num_envs,
-            is_distributed=runner.is_distributed,
-            gpu_world_size=runner.gpu_world_size,
-            gpu_global_rank=runner.gpu_global_rank,
-            device=runner.device,
-        )
-        self._env = runner.env
-        self.clear()
-
-    def clear(self) -> None:
-        """Forget the last iteration."""
-        self.steps, self.reward_sum, self.seconds = 0, 0.0, 0.0
-        self.finished_s: list[float] = []
-        self.term_sums: dict[str, float] = {}
-        self.losses: dict[str, float] = {}
-
-    def process_env_step(
-        self, rewards: torch.Tensor, dones: torch.Tensor, extras: dict, intrinsic_rewards: torch.Tensor | None = None
-    ) -> None:
-        """Add one control step of all worlds: mean reward, finished episodes' lengths, reward terms."""
-        self.steps += 1
-        self.reward_sum += float(rewards.mean())
-        if dones.any():
-            self.finished_s += (self._env.last_episode_length[dones] * self._env.dt).tolist()
-        for key, value in extras["log"].items():
-            if key.startswith("/reward/"):
-                name = key.removeprefix("/reward/")
-                self.term_sums[name] = self.term_sums.get(name, 0.0) + float(value)
-
-    def log(self, *, collect_time: float, learn_time: float, loss_dict: dict, **_) -> None:
-        """Keep the iteration's time (collection and update, s) and PPO losses."""
-        self.seconds = collect_time + learn_time
-        self.losses = {name: float(value) for name, value in loss_dict.items()}
-
-
 class GaitRunner(OnPolicyRunner):
     """rsl-rl's on-policy runner for one :class:`TrainRequest`. ``current_learning_iteration`` counts the
     iterations completed (resumed runs included), which is also the ``iter`` its checkpoints record."""
@@ -154,15 +88,28 @@ class GaitRunner(OnPolicyRunner):
     def __init__(self, env: ImitationEnv, request: TrainRequest) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the model structure
             super().__init__(env, rsl_rl_config(request.preset), log_dir=None, device=str(env.device))
-        self.logger = _IterationLog(self)
+        self.logger = IterationLog(self)
         self.request = request
         """The run."""
+        self.ranks = Ranks.from_env()
+        """This process's place among the training processes (``torchrun``; one process otherwise)."""
         self.samples = 0
         """Environment steps so far, all worlds (resumed runs included)."""
         self.elapsed = 0.0
         """Training time so far, s (resumed runs included)."""
         self.curve: list[list] = []
         """Learning-curve rows: iteration, training time s, mean reward, mean episode s (None: none ended)."""
+
+    def _configure_multi_gpu(self) -> None:
+        """rsl-rl's own multi-GPU setup for CUDA ranks (NCCL); a CPU rank joins over gloo with the same settings
+        (:func:`gaitlib.training.distributed.join`)."""
+        if str(self.device).startswith("cuda"):
+            super()._configure_multi_gpu()
+            return
+        ranks = Ranks.from_env()
+        self.gpu_world_size, self.is_distributed = ranks.world_size, ranks.distributed
+        self.gpu_local_rank, self.gpu_global_rank = ranks.local_rank, ranks.rank
+        self.cfg["multi_gpu"] = join(ranks)
 
     @property
     def checkpoints(self) -> Path:
@@ -181,6 +128,7 @@ class GaitRunner(OnPolicyRunner):
             "gait": self.request.description.name,
             "preset": self.request.preset.name,
             "seed": self.request.seed,
+            "world_size": self.ranks.world_size,
             "samples": self.samples,
             "elapsed_s": self.elapsed,
             "curve": self.curve,
@@ -214,9 +162,11 @@ class GaitRunner(OnPolicyRunner):
         log = self.logger
         log.clear()
         self.env.set_push_max(self.request.preset.push_max(self.current_learning_iteration))
-        super().learn(1)  # leaves current_learning_iteration at this iteration's index
+        with contextlib.redirect_stdout(io.StringIO()) if self.is_distributed else contextlib.nullcontext():
+            super().learn(1)  # leaves current_learning_iteration at this iteration's index (and, distributed,
+            # prints that it synchronizes the parameters)
         self.current_learning_iteration += 1
-        step_samples = self.env.num_envs * log.steps
+        step_samples = self.env.num_envs * log.steps * self.ranks.world_size
         self.samples += step_samples
         self.elapsed += log.seconds
         stats = IterationStats(
@@ -236,51 +186,71 @@ class GaitRunner(OnPolicyRunner):
 
     def train(self, *, on_iteration: Callable[[IterationStats], None] | None = None) -> None:
         """Iterate up to the request's iteration count or time limit, writing TensorBoard scalars to the run folder;
-        checkpoint every ``checkpoint_every`` iterations, at the end, and on Ctrl-C (then re-raise)."""
+        checkpoint every ``checkpoint_every`` iterations, at the end, and on Ctrl-C (then re-raise). Distributed,
+        rank 0 alone logs, reports and checkpoints, and decides when time is up."""
         from torch.utils.tensorboard import SummaryWriter
 
-        request = self.request
-        writer = SummaryWriter(log_dir=str(request.run_dir))
+        request, main = self.request, self.ranks.main
+        writer = SummaryWriter(log_dir=str(request.run_dir)) if main else None
         try:
             while self.current_learning_iteration < request.iterations:
                 stats = self.iterate()
-                _log(writer, stats)
-                if on_iteration is not None:
-                    on_iteration(stats)
-                if stats.iteration % request.checkpoint_every == 0:
-                    self.checkpoint()
-                    self.checkpoint(f"model_{stats.iteration}.pt")
-                if request.time_limit_s is not None and self.elapsed >= request.time_limit_s:
+                if main:
+                    write_scalars(writer, stats)
+                    if on_iteration is not None:
+                        on_iteration(stats)
+                    if stats.iteration % request.checkpoint_every == 0:
+                        self.checkpoint()
+                        self.checkpoint(f"model_{stats.iteration}.pt")
+                late = request.time_limit_s is not None and self.elapsed >= request.time_limit_s
+                if agree(late, device=str(self.device)):
                     break
         except KeyboardInterrupt:
-            self.checkpoint()
+            if main:
+                self.checkpoint()
             raise
         finally:
-            writer.close()
-        self.checkpoint()
+            if writer is not None:
+                writer.close()
+        if main:
+            self.checkpoint()
 
 
-def train_gait(request: TrainRequest, *, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:
-    """Train, checkpoint, evaluate and write the library entry; Ctrl-C saves a checkpoint and re-raises."""
+def train_gait(
+    request: TrainRequest, *, on_iteration: Callable[[IterationStats], None] | None = None
+) -> TrainResult | None:
+    """Train, checkpoint, evaluate and write the library entry; Ctrl-C saves a checkpoint and re-raises.
+
+    Under ``torchrun`` every rank trains its own worlds with seed ``request.seed + rank``; rank 0 writes the entry
+    and gets the result, the other ranks ``None`` (:mod:`gaitlib.training.distributed`).
+    """
     if request.iterations < 1:
         raise GaitlibError(f"--iterations must be positive, got {request.iterations}")
-    torch.manual_seed(request.seed)
+    ranks = Ranks.from_env()
+    seed = request.seed + ranks.rank
+    torch.manual_seed(seed)
     preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
     env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=preset.push_max(0)))
-    sim = make_backend(backend_name, num_worlds=preset.num_envs)
+    sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
     try:
-        runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=request.seed), request)
+        runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=seed), request)
         if request.resume:
             runner.resume()
         runner.train(on_iteration=on_iteration)
+        in_sync = parameters_in_sync(runner.alg.get_policy(), device=str(runner.device))
     finally:
         sim.close()
-    return _finish(runner, clip, backend_name, env_cfg)
+    try:
+        return _finish(runner, clip, backend_name, env_cfg, in_sync=in_sync) if ranks.main else None
+    finally:
+        leave()
 
 
-def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig) -> TrainResult:
+def _finish(
+    runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig, *, in_sync: bool
+) -> TrainResult:
     """Evaluate the trained policy and write it, with its run record, into the library."""
     request, preset, alg = runner.request, runner.request.preset, runner.alg
     alg.eval_mode()
@@ -314,6 +284,7 @@ def _finish(runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg:
             "push_force_max_n": preset.push_max(runner.current_learning_iteration),
             "push_ramp_iterations": preset.push_ramp_iterations,
             "randomization": dataclasses.asdict(env_cfg.randomization),
+            "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},
             "episode_seconds": preset.episode_seconds,
             "curve": {
                 "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
@@ -361,16 +332,3 @@ def _thin_curve(rows: list[list], *, most: int = _CURVE_ROWS) -> list[list]:
     """Every k-th row of a learning curve (about ``most`` rows) and the last row, each once."""
     kept = rows[:: max(1, len(rows) // most)]
     return kept if kept[-1:] == rows[-1:] else kept + rows[-1:]
-
-
-def _log(writer, stats: IterationStats) -> None:
-    step = stats.iteration
-    writer.add_scalar("train/mean_reward", stats.mean_reward, step)
-    writer.add_scalar("train/samples_per_s", stats.samples_per_s, step)
-    writer.add_scalar("train/wall_clock_s", stats.elapsed, step)
-    if not math.isnan(stats.mean_episode_length):
-        writer.add_scalar("train/mean_episode_length_s", stats.mean_episode_length, step)
-    for name, value in stats.reward_terms.items():
-        writer.add_scalar(f"reward/{name}", value, step)
-    for name, value in stats.losses.items():
-        writer.add_scalar(f"loss/{name}", value, step)
