@@ -257,7 +257,10 @@ def test_interrupted_collection_resumes_without_loss_or_duplicates(interrupted) 
     assert np.all(np.diff(chunks) >= 0) and chunks[0] == 0 and set(chunks[8:].tolist()) == {1, 2}
     sessions = after.info.sessions
     assert [s["first_chunk"] for s in sessions] == [0, 1] and [s["samples_at_start"] for s in sessions] == [0, 8]
-    assert sessions[0]["env_seed"] != sessions[1]["env_seed"]
+    assert sessions[0]["chunk_seeds"].startswith("numpy.random.SeedSequence([0, chunk])")
+    assert [s["chunk_samples"] for s in sessions] == [8, 8]
+    # Each chunk draws its own numbers (seeded from the seed and the chunk index): chunks 0 and 1 differ.
+    assert not np.array_equal(after.samples.phase_dest[:8], after.samples.phase_dest[8:16])
     assert [p.samples for p in seen] == [16, 24] and seen[-1].samples_per_s > 0
     assert sum(n for _, n in seen[-1].pair_counts.values()) == 24
     assert set(seen[-1].success_rates) <= {("stand", "trot"), ("trot", "stand")}
@@ -308,10 +311,9 @@ def test_a_success_chains_into_the_next_sample_without_a_reset(interrupted) -> N
     path = interrupted[0]
     s = read(path).samples
     assert validate(path).header.settings["chain"] is True
-    second = s.select(s.chunk >= 1)  # one collection run: worlds are not restarted in between
     chained = after_failure = 0
-    for world in np.unique(second.world):
-        rows = second.select(second.world == world)
+    for chunk, world in {(int(c), int(w)) for c, w in zip(s.chunk, s.world)}:  # a chunk starts every world afresh
+        rows = s.select((s.chunk == chunk) & (s.world == world))
         for prev, cur in zip(range(len(rows) - 1), range(1, len(rows))):
             if rows.success[prev] and rows.switch_time[cur] > rows.switch_time[prev]:  # no reset in between:
                 assert rows.source[cur] == rows.dest[prev]  # the destination went on and became the next source

@@ -15,8 +15,10 @@ One transition, per world, all worlds at once (a group = one strategy at one mag
 4. success if the robot does not fall from the request until ``horizon_s`` after the switch (which always covers
    the whole disturbance window).
 
-Results are written to ``OUT/results.json`` (atomically) after each group; a rerun with the same settings skips
-the finished groups, so an interrupted sweep loses at most the group under way.
+Each group is a unit of work (its own seed, a fresh simulator), run here or on a Ray worker (:class:`GroupWorker`);
+results are written to ``OUT/results.json`` (atomically, by this process alone, in group order) after each group;
+a rerun with the same settings skips the finished groups, so an interrupted sweep loses at most the groups under
+way.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import numpy as np
 import torch
 
 from gaitlib.atomic import write_json
+from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
@@ -43,6 +46,8 @@ __all__ = [
     "FORMAT_NAME",
     "MAGNITUDE_RESOLUTION_N",
     "CellCounts",
+    "GroupTask",
+    "GroupWorker",
     "SweepConfig",
     "default_magnitudes",
     "group_key",
@@ -175,10 +180,14 @@ def run_sweep(
     config: SweepConfig,
     *,
     progress: Callable[[str, int, int], None] | None = None,
+    cluster: ClusterConfig | None = None,
 ) -> dict:
     """Run (or resume) the sweep into ``out``; returns the results dict (as written to ``results.json``).
 
-    ``progress(group, done, total)`` is called as transitions finish (``done`` over the whole sweep).
+    Groups run one after the other in this process, or with ``cluster`` on Ray workers (:mod:`gaitlib.cluster`);
+    either way this process alone writes ``results.json``, in group order, and the results are the same.
+    ``progress(group, done, total)`` is called as transitions finish (``done`` over the whole sweep; with Ray, as
+    groups finish).
     """
     cfg = config
     out = Path(out)
@@ -205,30 +214,67 @@ def run_sweep(
         }
     groups = list(itertools.product(cfg.strategies, cfg.magnitudes))
     per_group = cfg.samples * len(pairs)
-    done = sum(per_group for s, m in groups if group_key(s, m) in results["groups"])
     total = per_group * len(groups)
-    for strategy, magnitude in groups:
-        key = group_key(strategy, magnitude)
-        if key in results["groups"]:
-            continue
-        start = time.perf_counter()
-        base = done
-
-        def report(finished: int, key: str = key, base: int = base) -> None:
-            if progress is not None:
-                progress(key, base + finished, total)
-
-        cells = _run_group(setup, strategy, magnitude, pairs, cfg, report)
-        done = base + per_group
-        results["groups"][key] = {
-            "strategy": strategy,
-            "magnitude_n": magnitude,
-            "backend": resolve_backend_name(cfg.backend),
-            "elapsed_s": round(time.perf_counter() - start, 2),
-            "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
-        }
-        write_json(out / "results.json", results, indent=1)
+    todo = [GroupTask(s, m) for s, m in groups if group_key(s, m) not in results["groups"]]
+    done = total - per_group * len(todo)
+    worker = {"library": str(setup.resources.library.root), "identities": identities, "pairs": pairs, "config": cfg}
+    if cluster is None:  # in this process: progress within each group too
+        worker |= {"setup": setup, "progress": lambda key, n: progress and progress(key, done + n, total)}
+    else:
+        cluster = cluster.for_backend(resolve_backend_name(cfg.backend), cfg.device)
+    ordered = run_ordered(todo, spec=WorkerSpec(GroupWorker, worker), cluster=cluster)
+    try:
+        for task, (cells, elapsed) in ordered:
+            key = group_key(task.strategy, task.magnitude)
+            done += per_group
+            results["groups"][key] = {
+                "strategy": task.strategy,
+                "magnitude_n": task.magnitude,
+                "backend": resolve_backend_name(cfg.backend),
+                "elapsed_s": round(elapsed, 2),
+                "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
+            }
+            write_json(out / "results.json", results, indent=1)
+            if progress is not None and cluster is not None:
+                progress(key, done, total)
+    finally:
+        ordered.close()
     return results
+
+
+@dataclass(frozen=True)
+class GroupTask:
+    """One group of the sweep: a strategy at a push magnitude (all pairs)."""
+
+    strategy: str
+    magnitude: float
+    """Push magnitude, N."""
+
+
+class GroupWorker:
+    """Loads the library's switching setup once; called with a :class:`GroupTask`, it runs that group on a fresh
+    simulator and returns its cells and its wall-clock time, s. Its results are a pure function of the task, the
+    settings and the library (the group's seed derives from the sweep's seed and the magnitude). Built with keyword
+    arguments only, so that Ray can build it in an actor."""
+
+    def __init__(self, *, library: str, identities: dict, pairs: list, config: SweepConfig, setup=None,
+                 progress: Callable[[str, int], None] | None = None) -> None:
+        from gaitlib.meta import load_switching
+
+        self._setup = setup if setup is not None else load_switching(library)
+        if self._setup.resources.library.identities(self._setup.gaits) != identities:
+            raise GaitlibError(f"the library at {library} holds other policies than the sweep's (identities)")
+        self._pairs, self._cfg, self._progress = [tuple(p) for p in pairs], config, progress
+
+    def __call__(self, task: GroupTask) -> tuple[dict[tuple[str, str], CellCounts], float]:
+        start, key = time.perf_counter(), group_key(task.strategy, task.magnitude)
+
+        def report(finished: int) -> None:
+            if self._progress is not None:
+                self._progress(key, finished)
+
+        cells = _run_group(self._setup, task.strategy, task.magnitude, self._pairs, self._cfg, report)
+        return cells, time.perf_counter() - start
 
 
 def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:

@@ -25,12 +25,17 @@ __all__ = [
     "PUSH_N",
     "DELAY_STEPS",
     "SEED",
+    "WORKERS",
     "WORLDS",
     "WORLD_BYTES",
     "Bounds",
     "OptionError",
     "bounded",
     "check_worlds",
+    "cluster_config",
+    "ray_address_argument",
+    "ray_option",
+    "workers_option",
     "parse_magnitudes",
     "parse_pairs",
 ]
@@ -98,6 +103,8 @@ DELAY_STEPS = Bounds(low=0, high=10, whole=True)
 """Action delays, control steps (10: a third of a second at 30 Hz)."""
 MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
+WORKERS = Bounds(low=1, high=4096, whole=True)
+"""Ray workers of one job (each a process with its own simulator)."""
 
 
 def bounded(default, *names: str, help: str, bounds: Bounds):
@@ -108,6 +115,57 @@ def bounded(default, *names: str, help: str, bounds: Bounds):
         return bounds.check(param.opts[0], value)
 
     return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check)
+
+
+def ray_option():
+    """``--ray``: run the job's chunks on Ray workers, on a local Ray started for the run or, with the ADDRESS
+    argument (:func:`ray_address_argument`), on a running cluster. Without Ray installed it is refused in one line
+    at parse time."""
+
+    def check(param: typer.CallbackParam, value: bool) -> bool:
+        if value:
+            from gaitlib.cluster import ClusterError, require_ray
+
+            try:
+                require_ray()
+            except ClusterError as error:
+                raise OptionError(str(error)) from None
+        return value
+
+    return typer.Option(
+        False, "--ray", help="Run on Ray workers (needs Ray: the cluster extra of gaitlib).", callback=check
+    )
+
+
+def ray_address_argument():
+    """``[ADDRESS]`` after ``--ray``: the Ray cluster to join (``auto``: the one this node belongs to). It is a
+    positional argument so that ``--ray`` alone, ``--ray auto`` and ``--ray ray://head:10001`` all parse."""
+    return typer.Argument(
+        None, metavar="[ADDRESS]", show_default=False,
+        help="With --ray: the cluster to join, auto (this node's) or ray://HOST:10001; none: a local Ray.",
+    )
+
+
+def workers_option():
+    """``--workers N`` (with ``--ray``): Ray workers, each loading the library once and owning a simulator."""
+    return bounded(
+        None, "--workers", help="Ray workers, with --ray (default: one per CPU of the cluster, or per GPU);",
+        bounds=WORKERS,
+    )
+
+
+def cluster_config(ray: bool, address: str | None, workers: int | None):
+    """The :class:`~gaitlib.cluster.ClusterConfig` of ``--ray [ADDRESS]`` and ``--workers`` (``None``: no Ray); an
+    address or ``--workers`` without ``--ray`` is refused."""
+    if not ray:
+        if address is not None:
+            raise OptionError(f"unexpected argument '{address}' (a Ray address goes after --ray)")
+        if workers is not None:
+            raise OptionError("--workers needs --ray (without it the job runs in this process)")
+        return None
+    from gaitlib.cluster import ClusterConfig
+
+    return ClusterConfig(address=address, workers=workers)
 
 
 def check_worlds(option: str, worlds: int, *, backend: str) -> None:

@@ -9,7 +9,17 @@ from pathlib import Path
 
 import typer
 
-from gaitlib.cli.options import COUNT, PUSH_N, SEED, WORLDS, Bounds, bounded
+from gaitlib.cli.options import (
+    COUNT,
+    PUSH_N,
+    SEED,
+    WORLDS,
+    Bounds,
+    bounded,
+    ray_address_argument,
+    ray_option,
+    workers_option,
+)
 
 __all__ = ["collect_command", "fit_command", "map_command"]
 
@@ -41,16 +51,24 @@ def collect_command(
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    chunk: int | None = bounded(
+        None, "--chunk", help="Samples per chunk, the unit of work and of a commit (default: 16 per world);",
+        bounds=Bounds(low=1, high=1e7, whole=True),
+    ),
+    ray: bool = ray_option(),
+    address: str | None = ray_address_argument(),
+    workers: int | None = workers_option(),
 ) -> None:
     """Collect policy-switch samples into HDF5: run m, switch to n at a random phase, label whether it stays up."""
     from rich.console import Console
     from rich.markup import escape
 
-    from gaitlib.cli.options import check_worlds, parse_pairs
+    from gaitlib.cli.options import check_worlds, cluster_config, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import Library
     from gaitlib.transitions import CollectConfig, collect
 
+    cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
@@ -62,6 +80,7 @@ def collect_command(
         pairs=parse_pairs(pairs, names),
         backend=backend,
         seed=seed,
+        batch_size=chunk,
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     console = Console(stderr=True)
@@ -75,7 +94,7 @@ def collect_command(
             if not console.is_terminal:
                 console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)
 
-        result = collect(out, library=lib, gaits=names, config=config, progress=show)
+        result = collect(out, library=lib, gaits=names, config=config, progress=show, cluster=cluster)
     if result.note:
         console.print(result.note)
     console.print(
