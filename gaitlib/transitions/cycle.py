@@ -130,6 +130,7 @@ class SwitchCycles:
         self._pair = torch.zeros(n, dtype=torch.long, device=dev)  # index into the pairs of each world's cycle
         self._quota = torch.as_tensor(quota, dtype=torch.long)  # (P,) samples of each pair in this chunk
         self._load = torch.zeros(len(pairs), dtype=torch.long)  # cycles begun per pair (finished or under way)
+        self._filled = torch.zeros(len(pairs), dtype=torch.long)  # samples kept per pair
         self._active = torch.zeros(n, dtype=torch.bool, device=dev)  # worlds in a cycle (the others are idle)
         self._in_horizon = torch.zeros(n, dtype=torch.bool, device=dev)
         self._steps_left = torch.zeros(n, dtype=torch.long, device=dev)  # in the current stage, control steps
@@ -174,8 +175,8 @@ class SwitchCycles:
 
     @property
     def done(self) -> bool:
-        """Every quota is filled: all cycles begun and none under way."""
-        return bool(self._load.sum() >= self._quota.sum()) and not bool(self._active.any())
+        """Every quota is filled."""
+        return bool((self._filled >= self._quota).all())
 
     def take(self) -> schema.TransitionBatch:
         """The finished samples in the order they finished (``chunk`` 0: the caller sets it)."""
@@ -230,13 +231,18 @@ class SwitchCycles:
         return chosen.to(self._dev)
 
     def _least_sampled(self, k: int) -> torch.Tensor:
-        """(k,) pairs for k new cycles, filling up the least-begun open pairs first (ties at random); -1 for the
-        worlds left over once every quota is begun."""
+        """(k,) pairs for k new cycles, filling up the least-begun open pairs first (ties at random). Once every
+        quota is begun, the worlds left over run spare cycles of the pairs not yet filled (the least-begun first;
+        the first samples to finish are kept), so that the chunk's last samples do not wait on a few worlds; -1
+        (idle) once every pair is filled."""
         levels = self._load.unsqueeze(1) + torch.arange(k).unsqueeze(0)  # (P, k): load after 1..k more cycles
         keys = levels + 0.5 * torch.rand(levels.shape, generator=self._gen)
-        keys = torch.where(levels < self._quota.unsqueeze(1), keys, torch.inf)
         room = int((self._quota - self._load).clamp(min=0).sum())
-        chosen = torch.topk(keys.flatten(), min(k, room), largest=False).indices // k
+        unfilled = self._filled < self._quota
+        open_keys = torch.where(levels < self._quota.unsqueeze(1), keys, torch.inf)
+        spare_keys = torch.where(unfilled.unsqueeze(1), keys, torch.inf)
+        count = min(k, room) if room else (k if bool(unfilled.any()) else 0)
+        chosen = torch.topk((open_keys if room else spare_keys).flatten(), count, largest=False).indices // k
         self._load += torch.bincount(chosen, minlength=len(self._load))
         chosen = torch.cat([chosen, torch.full((k - len(chosen),), -1, dtype=torch.long)])
         return chosen[torch.randperm(k, generator=self._gen)]
@@ -261,10 +267,18 @@ class SwitchCycles:
         self._steps_left[ids] = self._horizon
 
     def _finish(self, ids: torch.Tensor, alive: torch.Tensor) -> None:
+        """Keep the samples of worlds ``ids`` whose pair is not yet filled (in world order)."""
+        self._active[ids] = False  # until _restart or _continue picks a new cycle
+        keep = []
+        for row, pair in enumerate(self._pair[ids].tolist()):
+            if self._filled[pair] < self._quota[pair]:
+                self._filled[pair] += 1
+                keep.append(row)
+        ids = ids[torch.tensor(keep, dtype=torch.long, device=ids.device)]
+
         def rows(t: torch.Tensor) -> np.ndarray:
             return t[ids].cpu().numpy()
 
-        self._active[ids] = False  # until _restart or _continue picks a new cycle
         self._done.append(
             schema.TransitionBatch(
                 source=rows(self._source),
