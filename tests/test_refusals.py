@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 
 import pytest
 import torch
@@ -33,6 +34,9 @@ PARSE_REFUSALS = [
     (["fit", "--epochs", "0"], "--epochs must be a whole number in [1, 1000000], got 0"),
     (["benchmark", "--samples", "0"], "--samples must be a whole number in [1, 1000000], got 0"),
     (["benchmark", "--worlds", "0"], "--worlds must be a whole number in [1, 65536], got 0"),
+    (["collect", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
+    (["benchmark", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
+    (["collect", "--chunk", "0"], "--chunk must be a whole number in [1, 10000000], got 0"),
     (["run", "--seconds", "inf"], "--seconds must be a finite number in (0, 600] s, got inf"),
     (["run", "--push", "nan"], "--push must be a finite number in [0, 2000] N, got nan"),
     (["run", "--push", "-100"], "--push must be a finite number in [0, 2000] N, got -100"),
@@ -187,3 +191,15 @@ def test_a_resumed_benchmark_with_other_worlds_is_refused(tmp_path) -> None:
     _refused(gaitlib_quick(*args, "--worlds", "3"),
              f"{out} holds a benchmark with other settings (num_worlds); use another --out or delete it")
     assert (out / "results.json").read_bytes() == before
+
+
+@pytest.mark.parametrize("command", ["collect", "benchmark"])
+def test_ray_options_are_refused_in_one_line_without_ray_or_without_each_other(command, tmp_path, monkeypatch):
+    out = ["--out", str(tmp_path / "new" / ("x.h5" if command == "collect" else "bench"))]
+    monkeypatch.setitem(sys.modules, "ray", None)  # as where Ray is not installed: `import ray` fails
+    _refused(gaitlib_quick(command, "--ray", "--workers", "2", *out),
+             '--ray needs Ray, which is not installed: pip install -e ".[cluster]"')
+    _refused(gaitlib_quick(command, "--workers", "2", *out),
+             "--workers needs --ray (without it the job runs in this process)")
+    _refused(gaitlib_quick(command, "auto", *out), "unexpected argument 'auto' (a Ray address goes after --ray)")
+    assert list(tmp_path.iterdir()) == []

@@ -8,7 +8,18 @@ from pathlib import Path
 
 import typer
 
-from gaitlib.cli.options import COUNT, EPISODE_SECONDS, MAX_MAGNITUDES, PUSH_N, SEED, WORLDS, bounded
+from gaitlib.cli.options import (
+    COUNT,
+    EPISODE_SECONDS,
+    MAX_MAGNITUDES,
+    PUSH_N,
+    SEED,
+    WORLDS,
+    bounded,
+    ray_address_argument,
+    ray_option,
+    workers_option,
+)
 
 __all__ = ["benchmark_command", "run_command"]
 
@@ -111,18 +122,22 @@ def benchmark_command(
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (success per strategy, pair, N)."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    ray: bool = ray_option(),
+    address: str | None = ray_address_argument(),
+    workers: int | None = workers_option(),
 ) -> None:
     """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot."""
     from rich.console import Console
 
     from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
     from gaitlib.benchmark.sweep import SweepConfig, run_sweep
-    from gaitlib.cli.options import check_worlds, parse_magnitudes, parse_pairs
+    from gaitlib.cli.options import check_worlds, cluster_config, parse_magnitudes, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
+    cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
     swept = parse_magnitudes(magnitudes)
     setup = load_switching(library)
@@ -150,7 +165,7 @@ def benchmark_command(
                 console.print(f"{done}/{total} transitions, now {group}")
                 last[0] = group
 
-        results = run_sweep(out, setup, config, progress=show)
+        results = run_sweep(out, setup, config, progress=show, cluster=cluster)
     rows = cell_results(results)
     if not rows:
         raise GaitlibError("the benchmark produced no results")
