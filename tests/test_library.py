@@ -77,7 +77,9 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
     report = fit_library(library, own, sources=[tmp_path / "own.h5"], inputs=("phase", "latent"), epochs=1)
     written = json.loads(library.accuracy_path.read_text())
     assert written == report.as_dict() and written["input_written"] == "phase"
-    assert written["written"] == ["switching/net.pt", "switching/tmt.json", "switching/accuracy.json"]
+    assert written["written"] == [
+        "switching/net.pt", "switching/tmt.json", "switching/accuracy.json", "switching/calibration.json"
+    ]
     assert set(written["balanced_validation_accuracy"]) == {"phase", "latent"}
     assert written["paper_table_3"]["latent"]["trot-stand"] == pytest.approx(0.7549)  # fractions, like ours
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from conftest import copy_library
 
 from gaitlib.errors import TransitionDataError, UnknownNameError
 from gaitlib.strategies import (
@@ -23,10 +24,15 @@ from gaitlib.strategies import (
     save_table,
     strategy_names,
 )
+from gaitlib.meta.episode import run_episode
+from gaitlib.meta.setup import load_switching
+from gaitlib.strategies.calibration import Calibration, calibrate, platt
+from gaitlib.strategies.lookahead import LookaheadStrategy
 from gaitlib.strategies.net import NetStrategy
 from gaitlib.strategies.random_switch import RandomStrategy
 from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, best_threshold
 from gaitlib.strategies.value import ValueStrategy
+from gaitlib.training import Library
 from gaitlib.transition_net import FeatureSpec, TransitionNet
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 
@@ -207,3 +213,86 @@ def test_a_table_for_other_policies_or_a_foreign_file_is_refused(tmp_path) -> No
         load_table(foreign, identities=IDENTITIES)
     with pytest.raises(TransitionDataError, match="no TMT"):
         load_table(tmp_path / "missing.json", identities=IDENTITIES)
+
+
+# ----------------------------------------------------------------------------------- calibration and lookahead
+HEADER = TransitionHeader(gaits=GAITS, identities=tuple(IDENTITIES.values()), latent_dim=4, settings={})
+
+
+def synthetic_batch(n: int, success: np.ndarray) -> TransitionBatch:
+    """n trot -> stand switches with the given outcomes (other columns random)."""
+    rng = np.random.default_rng(2)
+    return TransitionBatch(
+        source=np.ones(n), dest=np.zeros(n), latent=rng.normal(size=(n, 4)), phase_source=rng.random(n),
+        phase_dest=rng.random(n), explicit=rng.normal(size=(n, 66)), value_source=np.ones(n), value_dest=np.ones(n),
+        push_force=np.zeros(n), success=success, switch_time=np.ones(n), world=np.zeros(n), chunk=np.zeros(n),
+    )
+
+
+def constant_net(probability: float) -> TransitionNet:
+    """A net that scores every input ``probability``."""
+    net = phase_net(bias=math.log(probability / (1 - probability)))
+    with torch.no_grad():
+        [m for m in net.mlp if isinstance(m, torch.nn.Linear)][3].weight.zero_()
+    return net.eval()
+
+
+def test_platt_recovers_the_map_the_labels_were_drawn_from() -> None:
+    rng = np.random.default_rng(0)
+    score = rng.uniform(0.02, 0.98, 20_000)
+    truth = 1 / (1 + np.exp(-(2.0 * np.log(score / (1 - score)) - 1.0)))
+    a, b = platt(score, rng.random(len(score)) < truth)
+    assert (a, b) == (pytest.approx(2.0, abs=0.1), pytest.approx(-1.0, abs=0.1))
+    # A weight is a repeated sample; and a pair that never fails keeps finite parameters.
+    few, labels = np.array([0.3, 0.6, 0.8]), np.array([False, True, True])
+    assert platt(few, labels, np.array([1.0, 2.0, 1.0])) == pytest.approx(platt(few[[0, 1, 1, 2]], labels[[0, 1, 1, 2]]))
+    assert all(math.isfinite(v) for v in platt(few, np.ones(3, dtype=bool)))
+
+
+def test_calibration_undoes_the_balanced_prior() -> None:
+    """A score that says nothing (0.5 everywhere) on a pair where 90% of switches succeed, calibrated on held-out
+    rows of which the training took as many failures as successes, is worth about 0.9."""
+    n = 2000
+    rng = np.random.default_rng(1)
+    success = rng.random(n) < 0.9
+    batch = synthetic_batch(n, success)
+    data = TransitionData(TransitionFileInfo(HEADER, n, [], None), batch)
+    failures, successes = np.flatnonzero(~success), np.flatnonzero(success)
+    train = np.r_[failures[: int(0.8 * len(failures))], successes[: int(0.8 * len(failures))]]  # balanced
+    calibration = calibrate(constant_net(0.5), data, train_rows=train, identities=IDENTITIES)
+    p = calibration.probability(torch.tensor([1]), torch.tensor([0]), torch.tensor([0.5]))
+    assert p.item() == pytest.approx(success.mean(), abs=0.02)
+    assert calibration.info["pairs"]["trot-stand"]["held_out"] == n - len(train)
+
+
+def test_lookahead_switches_unless_a_better_moment_comes_before_the_deadline() -> None:
+    table = empty_table()
+    table.counts[1, 0] = 8
+    table.successes[1, 0] = 2  # (2 + 1) / 10 = 0.3 at every source bin ...
+    table.successes[1, 0, 8] = 8  # ... but 0.9 at source bin 8 (phase 0.5-0.5625)
+    identity = Calibration(GAITS, IDENTITIES, {}, {})
+    strategy = LookaheadStrategy(phase_net(bias=0.0), identity, table)
+    strategy._net.scores = lambda q: torch.full((len(q.source), PHASE_GRID), 0.5)  # the net: 0.5 everywhere
+
+    def decide(steps_left: int) -> bool:
+        q = query(1, phase_source=0.0)
+        q.steps_left, q.phase_step = torch.tensor([steps_left]), torch.tensor([1 / 16])  # one bin per step
+        return bool(strategy.decide(q).switch.item())
+
+    assert decide(4)  # bins 1-4 offer 0.3 < 0.5: switch now
+    assert not decide(10)  # bin 8 comes in 8 steps and offers 0.9: wait
+    assert decide(0)  # nothing left to wait for
+
+
+def test_lookahead_runs_in_the_meta_controller_and_refuses_an_uncalibrated_library(switching_library, tmp_path):
+    setup = load_switching(switching_library)
+    trace = run_episode(
+        setup, source="trot", dest="stand", strategy="net-lookahead", request_s=0.2, seconds=0.8,
+        deadline_s=0.3, seed=1, backend="mujoco",
+    )
+    assert trace.switch is not None and not trace.switch.forced  # at the latest at the deadline, by its own choice
+    assert 0.2 - 1e-9 <= trace.switch_s <= 0.5 + 1e-9
+    uncalibrated = copy_library(Library(switching_library), tmp_path / "library")
+    uncalibrated.calibration_path.unlink()
+    with pytest.raises(TransitionDataError, match="no net calibration at .*run gaitlib fit again"):
+        get_strategy("net-lookahead", SwitchResources(library=uncalibrated, gaits=GAITS))

@@ -45,6 +45,11 @@ class ReferenceTracker:
         self._rate = torch.tensor([c.phase_rate for c in clips], device=device)
 
     @property
+    def rate(self) -> torch.Tensor:
+        """(G,) how fast each gait's phase advances, cycles per second (the inverse of its clip's period)."""
+        return self._rate
+
+    @property
     def wrapped_phase(self) -> torch.Tensor:
         """(N,) phase in [0, 1)."""
         return torch.remainder(self.phase, 1.0)

@@ -156,6 +156,8 @@ class MetaController:
             phase_source=env.phase[ids],
             latent=per_gait(self.policies, source, obs, method="latent"),
             candidates=self.candidates,
+            steps_left=(self.deadline_steps - self.waited[ids]).clamp(min=0),
+            phase_step=env.dt * env.reference.rate[source],
         )
         if self.strategy.needs_value:
             c = len(self.candidates)

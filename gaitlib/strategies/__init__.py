@@ -1,8 +1,9 @@
 """Switching strategies behind one interface (:class:`Strategy`), a small registry, and what they are built from.
 
-Built-in: ``random``, ``value``, ``tmt``, ``tmt-value`` (the baselines of the paper's Fig. 4) and ``net`` (the
-paper's transition-net rule). A strategy factory takes the :class:`SwitchResources` of a library (its TMT and
-transition-net, loaded only when a strategy asks); :func:`register_strategy` adds one.
+Built-in: ``random``, ``value``, ``tmt``, ``tmt-value`` (the baselines of the paper's Fig. 4), ``net`` (the
+paper's transition-net rule) and ``net-lookahead`` (the calibrated net against what waiting is worth). A strategy
+factory takes the :class:`SwitchResources` of a library (its TMT, transition-net and calibration, loaded only when a
+strategy asks); :func:`register_strategy` adds one.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from dataclasses import dataclass, field
 from gaitlib.errors import TransitionDataError
 from gaitlib.registry import Registry
 from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
+from gaitlib.strategies.calibration import Calibration, load_calibration
+from gaitlib.strategies.lookahead import LookaheadStrategy
 from gaitlib.strategies.net import NET_THRESHOLD, NetStrategy
 from gaitlib.strategies.random_switch import RandomStrategy
 from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, TransitionTable, build_table, load_table, save_table
@@ -61,6 +64,17 @@ class SwitchResources:
         return self._cache["table"]
 
     @property
+    def calibration(self) -> Calibration:
+        """The calibration of the library's transition-net (checked against the library's policies)."""
+        if "calibration" not in self._cache:
+            self.library.check_switching()
+            identities = self.library.identities(self.gaits)
+            calibration = load_calibration(self.library.calibration_path, identities=identities)
+            self._check_gaits("net calibration", calibration.gaits)
+            self._cache["calibration"] = calibration
+        return self._cache["calibration"]
+
+    @property
     def net(self):
         """The library's transition-net (:class:`~gaitlib.transition_net.TransitionNet`, eval mode)."""
         if "net" not in self._cache:
@@ -89,6 +103,7 @@ _STRATEGIES.register("value", lambda r: ValueStrategy(threshold=r.table.threshol
 _STRATEGIES.register("tmt", lambda r: TMTStrategy(r.table))
 _STRATEGIES.register("tmt-value", lambda r: TMTValueStrategy(r.table))
 _STRATEGIES.register("net", lambda r: NetStrategy(r.net))
+_STRATEGIES.register("net-lookahead", lambda r: LookaheadStrategy(r.net, r.calibration, r.table))
 
 
 def register_strategy(name: str, factory: StrategyFactory) -> None:

@@ -40,6 +40,10 @@ class SwitchQuery:
     dest_value: torch.Tensor | None = None
     """(k, C) destination critic V_n(s, g_n(phi_n)) on each candidate, divided by gait n's typical on-gait value;
     filled only for strategies whose ``needs_value`` is set."""
+    steps_left: torch.Tensor | None = None
+    """(k,) control steps left before the request is forced (0: this step); the meta-controller fills it."""
+    phase_step: torch.Tensor | None = None
+    """(k,) how far the source phase advances in one control step, cycles; the meta-controller fills it."""
 
 
 @dataclass

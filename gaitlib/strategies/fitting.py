@@ -2,8 +2,9 @@
 
 :func:`fit_library` checks that the data were collected with the library's own policies, fits the transition-net
 for each requested input kind (the paper's Table 3 ablation: latent, phase, explicit), builds the TMT with the
-strategies' calibrated thresholds, and publishes the net of the first kind asked for (``latent`` by default), the
-TMT and an accuracy report (``accuracy.json``) together as the library's ``switching/`` folder.
+strategies' calibrated thresholds, calibrates the net's score to real success rates on the rows it did not train
+on, and publishes the net of the first kind asked for (``latent`` by default), the TMT, an accuracy report
+(``accuracy.json``) and the calibration (``calibration.json``) together as the library's ``switching/`` folder.
 :func:`evaluate_library` scores the library's net on other data. ``gaitlib fit``, the examples and the tests all
 go through these two functions.
 """
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.errors import UnknownNameError
+from gaitlib.strategies.calibration import calibrate, save_calibration
 from gaitlib.strategies.tmt import build_table, save_table
 from gaitlib.training.library import Library
 from gaitlib.transition_net import INPUT_KINDS, EpochStats, FitConfig, FitResult, evaluate_net, fit, load_net, save_net
@@ -110,12 +112,18 @@ def fit_library(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
         results=results,
-        written=tuple(f"{Library.SWITCHING}/{name}" for name in (Library.NET, Library.TMT, Library.ACCURACY)),
+        written=tuple(
+            f"{Library.SWITCHING}/{name}"
+            for name in (Library.NET, Library.TMT, Library.ACCURACY, Library.CALIBRATION)
+        ),
     )
-    with library.publish_switching() as staging:  # the three replace the library's together, or none does
-        save_net(staging / Library.NET, next(iter(results.values())))
+    written = next(iter(results.values()))
+    calibration = calibrate(written.net, data, train_rows=written.split.train, identities=identities)
+    with library.publish_switching() as staging:  # the four replace the library's together, or none does
+        save_net(staging / Library.NET, written)
         save_table(staging / Library.TMT, build_table(data, identities=identities, source=", ".join(fitted.data)))
         write_json(staging / Library.ACCURACY, fitted.as_dict())
+        save_calibration(staging / Library.CALIBRATION, calibration)
     return fitted
 
 

@@ -6,6 +6,7 @@ A library folder holds one entry per gait and the switching models fitted on its
     <library>/switching/net.pt                               the transition-net (gaitlib fit)
     <library>/switching/tmt.json                             the TMT with the strategies' calibrated thresholds
     <library>/switching/accuracy.json                        how well the net and its input ablation did
+    <library>/switching/calibration.json                     the net's score mapped to real success rates
 
 Each entry and the ``switching`` folder are published whole (:mod:`gaitlib.training.publish`): a reader, or a
 writer killed at any moment, finds the old version or the new one, never neither and never a mix (a net beside
@@ -182,6 +183,8 @@ class Library:
     """The TMT and calibrated thresholds, in :attr:`SWITCHING`."""
     ACCURACY = "accuracy.json"
     """The fit's accuracy report (Table 3 layout), in :attr:`SWITCHING`."""
+    CALIBRATION = "calibration.json"
+    """The transition-net's score mapped to real success probabilities, in :attr:`SWITCHING`."""
 
     def __init__(self, root: Path | str | None = None) -> None:
         self.root = Path(root) if root is not None else default_library_dir()
@@ -207,6 +210,10 @@ class Library:
     def accuracy_path(self) -> Path:
         return self.switching_dir / self.ACCURACY
 
+    @property
+    def calibration_path(self) -> Path:
+        return self.switching_dir / self.CALIBRATION
+
     def check_switching(self) -> None:
         """Refuse, in one line, a library without fitted switching models, or with them in the layout of gaitlib
         0.1 (``transition_net/`` and ``tmt/``, written one file at a time)."""
@@ -221,8 +228,9 @@ class Library:
         raise TransitionDataError(f"library {self.root} has no transition-net and TMT yet (run gaitlib fit)")
 
     def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
-        """A staging folder to write the net, TMT and accuracy report into (names :attr:`NET`, :attr:`TMT`,
-        :attr:`ACCURACY`); they replace the library's together when the ``with`` block ends without an error."""
+        """A staging folder to write the net, TMT, accuracy report and calibration into (names :attr:`NET`,
+        :attr:`TMT`, :attr:`ACCURACY`, :attr:`CALIBRATION`); they replace the library's together when the ``with``
+        block ends without an error."""
         return staged_folder(self.switching_dir)
 
     def gaits(self) -> tuple[str, ...]:

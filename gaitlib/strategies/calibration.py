@@ -1,0 +1,145 @@
+"""The transition-net's score mapped to the real success probability of a switch.
+
+The net is fitted on label-balanced samples, as in the paper, so its score is a success probability under a 50%
+prior, not under a pair's real success rate: a score of 0.9 on a pair where 95% of switches succeed means less
+than it says, and no fixed threshold means the same on every pair. Platt scaling (J. Platt, "Probabilistic
+Outputs for Support Vector Machines", 1999) maps it, per ordered pair: ``p = sigmoid(a * logit(score) + b)``, with
+``a`` and ``b`` fitted by maximum likelihood on the samples the net never trained on, each label class weighted
+back to its share of the whole collection (the training rows took as many successes as failures, so the held-out
+rows alone would overstate the larger class), and Platt's smoothed targets so that a pair without failures keeps
+finite parameters. It is fitted on collection data, never on benchmark runs, and written beside the net
+(``library/switching/calibration.json``).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gaitlib.atomic import write_json
+from gaitlib.errors import TransitionDataError
+from gaitlib.training.library import check_identities
+from gaitlib.transition_net import TransitionNet, batch_features
+from gaitlib.transitions import TransitionData
+
+__all__ = ["Calibration", "calibrate", "load_calibration", "platt", "save_calibration"]
+
+FORMAT = {"format": "gaitlib.calibration", "format_version": 1}
+_EPS = 1e-6
+"""Scores are clipped to [eps, 1 - eps] before their logit."""
+
+
+def _logit(score: np.ndarray) -> np.ndarray:
+    s = np.clip(np.asarray(score, dtype=np.float64), _EPS, 1 - _EPS)
+    return np.log(s / (1 - s))
+
+
+def platt(score: np.ndarray, success: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, float]:
+    """Platt's (a, b) for ``p = sigmoid(a * logit(score) + b)``: weighted maximum likelihood by Newton's method,
+    with targets (N+ + 1) / (N+ + 2) for successes and 1 / (N- + 2) for failures (N: weighted counts)."""
+    z = _logit(score)
+    y = np.asarray(success, dtype=bool)
+    w = np.ones_like(z) if weight is None else np.asarray(weight, dtype=np.float64)
+    positives, negatives = w[y].sum(), w[~y].sum()
+    target = np.where(y, (positives + 1) / (positives + 2), 1 / (negatives + 2))
+    a, b = 1.0, 0.0
+    for _ in range(100):
+        p = 1 / (1 + np.exp(-(a * z + b)))
+        gradient = np.array([np.sum(w * (p - target) * z), np.sum(w * (p - target))])
+        curvature = w * np.maximum(p * (1 - p), 1e-12)
+        cross = np.sum(curvature * z)
+        hessian = np.array([[np.sum(curvature * z * z), cross], [cross, curvature.sum()]])
+        step = np.linalg.solve(hessian + 1e-9 * np.eye(2), gradient)
+        a, b = a - step[0], b - step[1]
+        if np.abs(step).max() < 1e-10:
+            break
+    return float(a), float(b)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Per ordered pair, Platt's (a, b) for one library's transition-net."""
+
+    gaits: tuple[str, ...]
+    """Gait names, in the net's order."""
+    identities: dict[str, str]
+    """Library identity of each gait's policy."""
+    pairs: dict[tuple[int, int], tuple[float, float]]
+    """(m, n) -> (a, b); a pair missing here is left as the net scores it."""
+    info: dict
+    """How it was fitted: samples and successes per pair, the rule."""
+
+    def probability(self, source: torch.Tensor, dest: torch.Tensor, score: torch.Tensor) -> torch.Tensor:
+        """(k,) calibrated success probability of net scores ``score`` (k,) for pairs ``source``/``dest`` (k,)."""
+        a = torch.ones_like(score)
+        b = torch.zeros_like(score)
+        for (m, n), (pa, pb) in self.pairs.items():
+            rows = (source == m) & (dest == n)
+            a[rows], b[rows] = pa, pb
+        z = torch.logit(score.clamp(_EPS, 1 - _EPS))
+        return torch.sigmoid(a * z + b)
+
+
+def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarray, identities: dict[str, str]):
+    """Fit the :class:`Calibration` of ``net`` on the rows of ``data`` outside ``train_rows`` (the rows it was
+    trained on), each (pair, label) class weighted by its count in ``data`` over its count among those rows."""
+    x = data.samples
+    held = np.ones(len(x), dtype=bool)
+    held[train_rows] = False
+    score = net.probability(batch_features(net.spec, x.select(held))).cpu().numpy()
+    source, dest, success = x.source[held], x.dest[held], x.success[held].astype(bool)
+    pairs, info = {}, {}
+    for m, n in sorted(set(zip(source.tolist(), dest.tolist(), strict=True))):
+        rows = (source == m) & (dest == n)
+        weight = np.empty(rows.sum())
+        for label in (True, False):
+            share = success[rows] == label
+            everywhere = ((x.source == m) & (x.dest == n) & (x.success.astype(bool) == label)).sum()
+            weight[share] = everywhere / max(1, share.sum())
+        pairs[(m, n)] = platt(score[rows], success[rows], weight)
+        gaits = data.header.gaits
+        info[f"{gaits[m]}-{gaits[n]}"] = {"held_out": int(rows.sum()), "successes": int(success[rows].sum())}
+    rule = "Platt scaling per ordered pair on held-out rows, classes weighted back to their share of the data"
+    return Calibration(tuple(data.header.gaits), dict(identities), pairs, {"pairs": info, "rule": rule})
+
+
+def save_calibration(path: Path, calibration: Calibration) -> Path:
+    """Write ``calibration`` as JSON, atomically."""
+    g = calibration.gaits
+    return write_json(
+        path,
+        FORMAT
+        | {
+            "gaits": list(g),
+            "library_identities": calibration.identities,
+            "pairs": {f"{g[m]}-{g[n]}": {"a": a, "b": b} for (m, n), (a, b) in calibration.pairs.items()},
+            "info": calibration.info,
+        },
+    )
+
+
+def load_calibration(path: Path, *, identities: dict[str, str]) -> Calibration:
+    """Read the calibration at ``path`` for the current library; one-line errors when it is missing (a library
+    fitted before calibration existed), foreign, damaged, or made for other policies."""
+    path = Path(path)
+    if not path.is_file():
+        raise TransitionDataError(f"no net calibration at {path} (run gaitlib fit again)")
+    try:
+        payload = json.loads(path.read_text())
+        if {k: payload.get(k) for k in FORMAT} != FORMAT:
+            raise ValueError("not a gaitlib net calibration of this version")
+        gaits = tuple(payload["gaits"])
+        index = {name: i for i, name in enumerate(gaits)}
+        pairs = {}
+        for text, ab in payload["pairs"].items():
+            m, _, n = text.partition("-")
+            pairs[(index[m], index[n])] = (float(ab["a"]), float(ab["b"]))
+        calibration = Calibration(gaits, dict(payload["library_identities"]), pairs, dict(payload["info"]))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
+        raise TransitionDataError(f"{path} is not a readable net calibration ({error}); run gaitlib fit") from error
+    check_identities(calibration.identities, identities, what=f"net calibration {path}")
+    return calibration
