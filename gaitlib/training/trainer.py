@@ -161,7 +161,7 @@ class GaitRunner(OnPolicyRunner):
         """One rsl-rl iteration (rollout, returns, PPO update); its statistics, also added to the curve."""
         log = self.logger
         log.clear()
-        self.env.set_push_max(self.request.preset.push_max(self.current_learning_iteration))
+        self.env.set_push_max(self.request.preset.push_max(self.current_learning_iteration, self.request.iterations))
         with contextlib.redirect_stdout(io.StringIO()) if self.is_distributed else contextlib.nullcontext():
             super().learn(1)  # leaves current_learning_iteration at this iteration's index (and, distributed,
             # prints that it synchronizes the parameters)
@@ -232,7 +232,8 @@ def train_gait(
     preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
-    env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=preset.push_max(0)))
+    # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the preset's curriculum.
+    env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=0.0))
     sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
     try:
         runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=seed), request)
@@ -281,8 +282,8 @@ def _finish(
             "samples": runner.samples,
             "wall_clock_s": round(runner.elapsed, 1),
             "seed": request.seed,
-            "push_force_max_n": preset.push_max(runner.current_learning_iteration),
-            "push_ramp_iterations": preset.push_ramp_iterations,
+            "push_force_max_n": preset.push_max(runner.current_learning_iteration, request.iterations),
+            "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
             "randomization": dataclasses.asdict(env_cfg.randomization),
             "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},
             "episode_seconds": preset.episode_seconds,
