@@ -194,24 +194,7 @@ def run_sweep(
     pairs = _pairs(cfg, setup)
     settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
     identities = setup.resources.library.identities(setup.gaits)
-    results = load_results(out)
-    if results:
-        if results["library_identities"] != identities:
-            raise GaitlibError(f"{out} holds a benchmark of other policies; use another --out or delete it")
-        saved = results["settings"]
-        differ = sorted(k for k in settings.keys() | saved.keys() if settings.get(k) != saved.get(k))
-        if differ:
-            raise GaitlibError(
-                f"{out} holds a benchmark with other settings ({', '.join(differ)}); use another --out or delete it"
-            )
-    else:
-        results = {
-            "format": FORMAT_NAME,
-            "format_version": FORMAT_VERSION,
-            "settings": settings,
-            "library_identities": identities,
-            "groups": {},
-        }
+    results = _open_results(out, settings, identities)
     groups = list(itertools.product(cfg.strategies, cfg.magnitudes))
     per_group = cfg.samples * len(pairs)
     total = per_group * len(groups)
@@ -275,6 +258,23 @@ class GroupWorker:
 
         cells = _run_group(self._setup, task.strategy, task.magnitude, self._pairs, self._cfg, report)
         return cells, time.perf_counter() - start
+
+
+def _open_results(out: Path, settings: dict, identities: dict) -> dict:
+    """The results in ``out`` if they are of these settings and policies (else one line), or new empty ones."""
+    results = load_results(out)
+    if not results:
+        return {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "settings": settings,
+                "library_identities": identities, "groups": {}}
+    if results["library_identities"] != identities:
+        raise GaitlibError(f"{out} holds a benchmark of other policies; use another --out or delete it")
+    saved = results["settings"]
+    differ = sorted(k for k in settings.keys() | saved.keys() if settings.get(k) != saved.get(k))
+    if differ:
+        raise GaitlibError(
+            f"{out} holds a benchmark with other settings ({', '.join(differ)}); use another --out or delete it"
+        )
+    return results
 
 
 def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:

@@ -1,10 +1,15 @@
 """Collect transition samples: library policies switched at random moments and phases, outcome after a horizon.
 
-Every world loops through the same cycle, all worlds at once (per-world state machines held as tensors):
+A collection is a sequence of independent **chunks** (:mod:`gaitlib.transitions.cycle`): each a fresh environment
+of ``num_worlds`` worlds seeded from ``SeedSequence([seed, chunk index])`` and a quota of samples per ordered pair
+(equal within one, the extra samples rotating over the pairs from chunk to chunk), so a chunk's samples are a pure
+function of (seed, chunk index, quota, settings, library) and chunks run here or on Ray workers
+(:mod:`gaitlib.cluster`) with the same result. Within a chunk every world loops through the same cycle, all worlds
+at once (per-world state machines held as tensors):
 
 1. reset (reference state initialization, fresh Table 1 randomization) with the source gait m of an ordered pair
-   (m, n): the allowed pair with the fewest samples so far (those in the file and in progress included; ties
-   broken at random), so every pair gets the same number of samples whatever its cycle length;
+   (m, n): the open pair (quota not all begun) begun least so far (ties broken at random), so every pair gets its
+   quota whatever its cycle length;
 2. run m's policy for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``]; a fall here is counted as
    a source fall and the world starts again at 1 with the same pair (so that the pairs of the samples stay
    uniform however often a source falls);
@@ -12,10 +17,12 @@ Every world loops through the same cycle, all worlds at once (per-world state ma
    re-anchored where the robot stands) and record n's critic value on the new observation;
 4. run n's policy for ``horizon_s``: alpha = 0 at the first termination, 1 if none.
 5. after a fall, back to 1. After a success the world goes on without a reset (``chain``): n, which has just run
-   for ``horizon_s``, becomes the next source, of the least-sampled pair starting from n, unless that pair is
-   more than one batch of worlds ahead of the least-sampled pair overall (then back to 1); the next switch comes
+   for ``horizon_s``, becomes the next source, of the least-begun open pair starting from n, unless that pair is
+   more than one batch of worlds ahead of the least-begun open pair (then back to 1); the next switch comes
    after a uniform time in [0, ``source_extra_s``]. This is how a robot runs on the meta-controller (one gait
    after another) and it saves the warm-up of most samples.
+6. once every quota is begun, free worlds run spare cycles of the pairs not yet filled; the first samples of a
+   pair to finish are kept, and the chunk ends when every quota is filled.
 
 At every step each world is driven by the policy of the gait it currently imitates. Episodes are made far longer
 than any cycle, so time-outs never cut a sample. With ``push_max`` > 0 random pushes (random horizontal direction,
@@ -24,10 +31,10 @@ while the source runs; from the switch on no new push starts (one under way runs
 by the state the switch finds, which is what the transition-net sees. Each sample records the largest push
 magnitude of its source run.
 
-Samples are committed in batches through :mod:`gaitlib.transitions.writer` (one writer per file; a kill loses at
-most the batch being written); rerunning with the same output file resumes (new random numbers, the count
-continues, nothing written is lost or repeated), and Ctrl-C writes the finished samples still in memory before it
-propagates. Nothing is created before the request is checked.
+This process alone commits the chunks, in chunk order, through :mod:`gaitlib.transitions.writer` (one writer per
+file; a kill or Ctrl-C loses the chunks under way, never a committed one); rerunning with the same output file
+resumes at the next chunk (the count continues, nothing written is lost or repeated). Nothing is created before
+the request is checked.
 """
 
 from __future__ import annotations
