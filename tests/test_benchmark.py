@@ -17,7 +17,8 @@ from gaitlib.benchmark.report import (
     write_csv,
     write_plot,
 )
-from gaitlib.benchmark.sweep import SweepConfig, load_results, run_sweep
+from gaitlib.benchmark.results import load_results
+from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import load_switching
 

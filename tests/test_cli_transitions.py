@@ -52,7 +52,9 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     report = json.loads(fitted.stdout)
     assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48
     assert 0 < report["balanced_samples"]["latent"] <= 48
-    assert sorted(p.name for p in (library / "switching").iterdir()) == ["accuracy.json", "net.pt", "tmt.json"]
+    assert sorted(p.name for p in (library / "switching").iterdir()) == [
+        "accuracy.json", "calibration.json", "net.pt", "tmt.json"
+    ]
     assert json.loads((library / "switching" / "accuracy.json").read_text()) == report
 
     scored = gaitlib_quick("fit", "--evaluate", "--data", data, "--library", lib, "--json")

@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from gaitlib.atomic import write_json
+from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
@@ -43,20 +44,15 @@ from gaitlib.meta import DEADLINE_S, SwitchingSetup
 from gaitlib.sim import make_backend, resolve_backend_name
 
 __all__ = [
-    "FORMAT_NAME",
     "MAGNITUDE_RESOLUTION_N",
     "CellCounts",
     "GroupTask",
     "GroupWorker",
     "SweepConfig",
     "default_magnitudes",
-    "group_key",
-    "load_results",
     "run_sweep",
 ]
 
-FORMAT_NAME = "gaitlib.benchmark"
-FORMAT_VERSION = 2  # 2: pushes from push_lead_s before the request until deadline_s after it
 _EPISODE_SECONDS = 1e6  # no time-outs: worlds are reset after each transition
 MAGNITUDE_RESOLUTION_N = 0.001
 """Push magnitudes that round to the same multiple of this, N, are one cell (one key, one seed)."""
@@ -150,30 +146,6 @@ class CellCounts:
     """Source runs that fell before the request (redone, not counted in ``samples``)."""
 
 
-def group_key(strategy: str, magnitude: float) -> str:
-    """The key of a (strategy, magnitude) group in ``results.json``, e.g. ``net@300`` or ``net@12.5``: the magnitude
-    at :data:`MAGNITUDE_RESOLUTION_N`."""
-    return f"{strategy}@{magnitude:.3f}".rstrip("0").rstrip(".")
-
-
-def load_results(out: Path) -> dict:
-    """``OUT/results.json`` (a one-line error for a foreign or unreadable file); ``{}`` when there is none."""
-    path = Path(out) / "results.json"
-    if not path.is_file():
-        return {}
-    try:
-        results = json.loads(path.read_text())
-    except (OSError, ValueError) as error:
-        raise GaitlibError(f"{path} is not readable benchmark results ({type(error).__name__})") from error
-    if not isinstance(results, dict) or results.get("format") != FORMAT_NAME:
-        raise GaitlibError(f"{path} is not gaitlib benchmark results")
-    if results.get("format_version") != FORMAT_VERSION:
-        raise GaitlibError(f"{path} is not gaitlib benchmark results of format version {FORMAT_VERSION}")
-    if not all(isinstance(results.get(key), dict) for key in ("settings", "library_identities", "groups")):
-        raise GaitlibError(f"{path} is damaged benchmark results (settings, identities or groups missing)")
-    return results
-
-
 def run_sweep(
     out: Path,
     setup: SwitchingSetup,
@@ -194,7 +166,7 @@ def run_sweep(
     pairs = _pairs(cfg, setup)
     settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
     identities = setup.resources.library.identities(setup.gaits)
-    results = _open_results(out, settings, identities)
+    results = open_results(out, settings, identities)
     groups = list(itertools.product(cfg.strategies, cfg.magnitudes))
     per_group = cfg.samples * len(pairs)
     total = per_group * len(groups)
@@ -258,23 +230,6 @@ class GroupWorker:
 
         cells = _run_group(self._setup, task.strategy, task.magnitude, self._pairs, self._cfg, report)
         return cells, time.perf_counter() - start
-
-
-def _open_results(out: Path, settings: dict, identities: dict) -> dict:
-    """The results in ``out`` if they are of these settings and policies (else one line), or new empty ones."""
-    results = load_results(out)
-    if not results:
-        return {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "settings": settings,
-                "library_identities": identities, "groups": {}}
-    if results["library_identities"] != identities:
-        raise GaitlibError(f"{out} holds a benchmark of other policies; use another --out or delete it")
-    saved = results["settings"]
-    differ = sorted(k for k in settings.keys() | saved.keys() if settings.get(k) != saved.get(k))
-    if differ:
-        raise GaitlibError(
-            f"{out} holds a benchmark with other settings ({', '.join(differ)}); use another --out or delete it"
-        )
-    return results
 
 
 def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
