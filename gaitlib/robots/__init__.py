@@ -1,13 +1,16 @@
 """Robot registry: a robot is an MJCF file plus the few facts the simulator needs to drive it.
 
 Adding a robot means writing its MJCF and constants module under ``gaitlib/robots/<name>/`` and calling
-:func:`register_robot` with a :class:`RobotSpec` (see ``docs/robot.md``).
+:func:`register_robot` with a :class:`RobotSpec` (see ``docs/robot.md``). Another MJCF of the A1 (MuJoCo Menagerie's,
+say) becomes a robot at run time through :func:`gaitlib.robots.variant.load_variant`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from gaitlib.registry import Registry
 
@@ -47,6 +50,16 @@ class RobotSpec:
     """Control (policy) rate, Hz."""
     substeps: int
     """Physics steps per control step; the MJCF timestep must equal 1 / (control_hz * substeps)."""
+    build_model: Callable[[], Any] | None = None
+    """Returns the compiled ``mujoco.MjModel`` to simulate instead of compiling :attr:`mjcf_path` (a model adapted in
+    memory from another MJCF, :mod:`gaitlib.robots.variant`); ``None``: :attr:`mjcf_path` is the model itself."""
+    stance_contact_geoms: tuple[str, ...] = ()
+    """Non-foot geoms whose ground contact is normal stance, not a fall (on MuJoCo Menagerie's A1 the lower calf
+    capsules reach the foot centre and touch the ground when the soft feet sink); each has a contact sensor
+    ``<geom>_contact`` against the floor like the feet'. Empty for gaitlib's own A1."""
+    motor_strength: float = 1.0
+    """The motors deliver this multiple of the PD law's torque, its limit included: ``tau = motor_strength *
+    clip(kp (q* - q) - kd qd, -torque_limit, torque_limit)`` (a deployment gap; 1: as modelled)."""
 
     @property
     def num_joints(self) -> int:

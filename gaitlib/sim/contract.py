@@ -11,7 +11,9 @@ Conventions for every tensor (``N`` = number of worlds, ``k`` = number of select
   world frame.
 * Joint tensors follow :attr:`gaitlib.robots.RobotSpec.joint_names`; foot tensors follow ``foot_names``.
 * PD law applied at every physics substep: ``tau = clip(kp * (q_target - q) - kd * qd, -tau_max, tau_max)``,
-  with ``q_target`` clipped to the joint range (the MJCF actuators' ``ctrlrange``).
+  with ``q_target`` clipped to the joint range (the MJCF actuators' ``ctrlrange``), times the robot's
+  ``motor_strength`` (1 unless a deployment gap is simulated; the ``mujoco`` backend alone supports other values,
+  and robots adapted from another MJCF, :mod:`gaitlib.robots.variant`).
 
 Readings (:meth:`SimBackend.state`) are taken after the last physics substep; contact flags and foot positions
 come from that substep's collision pass (at most one physics step, 1/240 s, old).
@@ -56,7 +58,8 @@ class SimState(KinematicState):
     foot_pos: torch.Tensor
     """(N, F, 3) foot contact-sphere centres in the world frame, m."""
     body_contact: torch.Tensor
-    """(N,) bool: some robot geometry other than a foot touches the ground."""
+    """(N,) bool: some robot geometry other than a foot, or than one of the robot's ``stance_contact_geoms``, touches
+    the ground."""
 
 
 def standing_state(robot: RobotSpec, num: int, *, device: torch.device | str = "cpu") -> KinematicState:

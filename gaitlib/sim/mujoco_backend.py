@@ -4,7 +4,9 @@ Each world owns an ``MjModel`` copy (so domain randomization is per world) and a
 the constraint solver keeps its warm start from step to step). The worlds are split into one contiguous chunk
 per thread; ``mj_step`` releases the GIL, so the chunks advance in parallel. PD control is MuJoCo's own
 ``<position>`` actuator (``kp`` in ``gainprm[0]``/``-biasprm[1]``, ``kv`` in ``-biasprm[2]``, clamped by
-``forcerange``), evaluated in C at every physics substep.
+``forcerange``), evaluated in C at every physics substep. A robot's ``motor_strength`` scales ``kp``, ``kv`` and
+``forcerange`` alike. A robot adapted from another MJCF (:mod:`gaitlib.robots.variant`) comes compiled from its
+``build_model``; ground contacts of its ``stance_contact_geoms`` are not body contacts.
 """
 
 from __future__ import annotations
@@ -28,12 +30,16 @@ _log = logging.getLogger(__name__)
 
 
 def load_model(robot: RobotSpec) -> mujoco.MjModel:
-    """Compile ``robot.mjcf_path`` and check it against the spec; raises :class:`SimulationError`."""
+    """Compile ``robot.mjcf_path`` (or take ``robot.build_model()``), check it against the spec and scale its
+    torque limits by ``robot.motor_strength``; raises :class:`SimulationError`."""
     try:
-        model = mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
+        model = robot.build_model() if robot.build_model else mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
     except ValueError as error:  # MuJoCo reports XML and compile errors as ValueError
         first_line = str(error).strip().splitlines()[0] if str(error).strip() else "compile error"
         raise SimulationError(f"cannot load robot model {robot.mjcf_path}: {first_line}") from error
+    if not 0.0 < robot.motor_strength < float("inf"):
+        raise SimulationError(f"motor strength must be a positive finite number, got {robot.motor_strength:g}")
+    model.actuator_forcerange[:] *= robot.motor_strength
     expected_dt = 1.0 / (robot.control_hz * robot.substeps)
     if abs(model.opt.timestep - expected_dt) > 1e-9:
         raise SimulationError(
@@ -76,6 +82,10 @@ class MujocoBackend(SimBackend):
         adr = {base.sensor(i).name: int(base.sensor_adr[i]) for i in range(base.nsensor)}
         self._foot_contact_adr = np.array([adr[f"{f}_contact"] for f in robot.foot_names])
         self._robot_contact_adr = adr["robot_contacts"]
+        missing = [g for g in robot.stance_contact_geoms if f"{g}_contact" not in adr]
+        if missing:
+            raise SimulationError(f"robot model has no contact sensor {missing[0]}_contact for its stance geom")
+        self._stance_contact_adr = np.array([adr[f"{g}_contact"] for g in robot.stance_contact_geoms], dtype=int)
         self._foot_pos_adr = np.array([adr[f"{f}_pos"] + k for f in robot.foot_names for k in range(3)])
 
         # Host buffers written by the worker threads, one row per world: [time, qpos, qvel] and sensordata.
@@ -131,7 +141,8 @@ class MujocoBackend(SimBackend):
 
     def set_pd_gains(self, world_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
         ids = _indices(world_ids)
-        kp_np, kd_np = _np(kp), _np(kd)
+        strength = self.robot.motor_strength  # the motors deliver this multiple of the PD torque
+        kp_np, kd_np = strength * _np(kp), strength * _np(kd)
         for row, i in enumerate(ids):
             m = self._models[i]
             m.actuator_gainprm[:, 0] = kp_np[row]
@@ -173,6 +184,7 @@ class MujocoBackend(SimBackend):
         qvel = torch.from_numpy(self._phys[:, 1 + nq :]).float()
         sensors = self._sensors
         foot_contacts = sensors[:, self._foot_contact_adr]
+        allowed = foot_contacts.sum(axis=1) + sensors[:, self._stance_contact_adr].sum(axis=1)
         return SimState(
             root_pos=qpos[:, 0:3],
             root_quat=qpos[:, 3:7],
@@ -182,8 +194,8 @@ class MujocoBackend(SimBackend):
             joint_vel=qvel[:, 6:],
             foot_contact=torch.from_numpy(foot_contacts > 0),
             foot_pos=torch.from_numpy(sensors[:, self._foot_pos_adr]).float().view(self.num_worlds, -1, 3),
-            # Robot geoms collide with the floor only, so any contact beyond the feet's is a body contact.
-            body_contact=torch.from_numpy(sensors[:, self._robot_contact_adr] > foot_contacts.sum(axis=1)),
+            # Every robot-floor contact beyond the feet' and the stance geoms' is a body contact.
+            body_contact=torch.from_numpy(sensors[:, self._robot_contact_adr] > allowed),
         )
 
     def close(self) -> None:
