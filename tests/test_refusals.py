@@ -12,6 +12,7 @@ import pytest
 import torch
 from cli_runner import gaitlib_quick
 
+from gaitlib.robots.a1.constants import JOINT_NAMES, MJCF_PATH
 from gaitlib.training import Library, default_library_dir
 
 
@@ -34,6 +35,10 @@ PARSE_REFUSALS = [
     (["fit", "--epochs", "0"], "--epochs must be a whole number in [1, 1000000], got 0"),
     (["benchmark", "--samples", "0"], "--samples must be a whole number in [1, 1000000], got 0"),
     (["benchmark", "--worlds", "0"], "--worlds must be a whole number in [1, 65536], got 0"),
+    (["benchmark", "--action-delay", "11"], "--action-delay must be a whole number in [0, 10], got 11"),
+    (["benchmark", "--action-delay", "-1"], "--action-delay must be a whole number in [0, 10], got -1"),
+    (["benchmark", "--motor-strength", "0"], "--motor-strength must be a finite number in (0, 10], got 0"),
+    (["benchmark", "--motor-strength", "nan"], "--motor-strength must be a finite number in (0, 10], got nan"),
     (["collect", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
     (["benchmark", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
     (["collect", "--chunk", "0"], "--chunk must be a whole number in [1, 10000000], got 0"),
@@ -99,6 +104,24 @@ def test_bad_push_magnitudes_are_refused(magnitudes, line, tmp_path) -> None:
     out = tmp_path / "bench"
     _refused(gaitlib_quick("benchmark", "--strategies", "random", "--magnitudes", magnitudes, "--out", str(out)), line)
     assert not out.exists()
+
+
+def test_a_robot_model_missing_not_an_a1_or_on_newton_is_refused_in_one_line(tmp_path) -> None:
+    out = ["--out", str(tmp_path / "bench")]
+    missing = (tmp_path / "missing.xml").resolve()
+    _refused(gaitlib_quick("benchmark", "--robot", str(missing), *out),
+             f"cannot read robot model {missing}: No such file or directory")
+    box = (tmp_path / "box.xml").resolve()
+    box.write_text('<mujoco><worldbody><geom name="floor" type="plane" size="1 1 .1"/>'
+                   '<body pos="0 0 1"><freejoint/><geom size=".1"/></body></worldbody></mujoco>')
+    _refused(gaitlib_quick("benchmark", "--robot", str(box), *out),
+             f"robot model {box} has no hinge joint {', '.join(JOINT_NAMES)} (an A1 names its joints FR_hip_joint ... "
+             "RL_calf_joint)")
+    _refused(gaitlib_quick("benchmark", "--robot", str(MJCF_PATH), "--backend", "newton", *out),
+             "--robot and --motor-strength run on the mujoco backend only, not on 'newton'; use --backend mujoco")
+    _refused(gaitlib_quick("benchmark", "--motor-strength", "0.8", "--backend", "newton", *out),
+             "--robot and --motor-strength run on the mujoco backend only, not on 'newton'; use --backend mujoco")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["box.xml"]
 
 
 def test_option_texts_that_name_nothing_are_refused(tmp_path) -> None:

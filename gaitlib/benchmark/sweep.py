@@ -15,6 +15,9 @@ One transition, per world, all worlds at once (a group = one strategy at one mag
 4. success if the robot does not fall from the request until ``horizon_s`` after the switch (which always covers
    the whole disturbance window).
 
+With a :class:`~gaitlib.benchmark.gap.DeploymentGap` the same sweep runs on another A1 model, with a fixed action
+delay or scaled motor torque (paper Fig. 4, bottom: the real robot; ``--magnitudes 0``).
+
 Each group is a unit of work (its own seed, a fresh simulator), run here or on a Ray worker (:class:`GroupWorker`);
 results are written to ``OUT/results.json`` (atomically, by this process alone, in group order) after each group;
 a rerun with the same settings skips the finished groups, so an interrupted sweep loses at most the groups under
@@ -28,20 +31,22 @@ import json
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from gaitlib.atomic import write_json
+from gaitlib.benchmark.gap import DeploymentGap
 from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import DEADLINE_S, SwitchingSetup
-from gaitlib.sim import make_backend, resolve_backend_name
+from gaitlib.robots import RobotSpec
+from gaitlib.sim import make_backend
 
 __all__ = [
     "MAGNITUDE_RESOLUTION_N",
@@ -92,8 +97,11 @@ class SweepConfig:
     """Quiet time before each push, s."""
     push_lead_s: float = DISTURBANCE_LEAD_S
     """Pushes begin this long before the request (shorter than ``warmup_s``) and end ``deadline_s`` after it, s."""
+    gap: DeploymentGap = field(default_factory=DeploymentGap)
+    """Another A1 model, a fixed action delay, a motor strength (default: none; it needs the ``mujoco``
+    backend)."""
     backend: str = "auto"
-    """Simulation backend."""
+    """Simulation backend (``auto`` is ``mujoco`` under a gap that needs it)."""
     device: str | None = None
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
@@ -121,13 +129,18 @@ class SweepConfig:
             raise GaitlibError(
                 "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
             )
+        self.backend_name()  # newton under a gap that needs mujoco: one line now
+
+    def backend_name(self) -> str:
+        """The backend the groups run on (``auto`` resolved)."""
+        return self.gap.backend_name(self.backend)
 
     def settings(self) -> dict:
-        """The settings a resumed sweep must repeat."""
+        """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        for name in ("backend", "device"):
+        for name in ("backend", "device", "gap"):
             fixed.pop(name)
-        return json.loads(json.dumps(fixed))
+        return json.loads(json.dumps(fixed | self.gap.settings()))
 
 
 @dataclass
@@ -176,7 +189,7 @@ def run_sweep(
     if cluster is None:  # in this process: progress within each group too
         worker |= {"setup": setup, "progress": lambda key, n: progress and progress(key, done + n, total)}
     else:
-        cluster = cluster.for_backend(resolve_backend_name(cfg.backend), cfg.device)
+        cluster = cluster.for_backend(cfg.backend_name(), cfg.device)
     ordered = run_ordered(todo, spec=WorkerSpec(GroupWorker, worker), cluster=cluster)
     try:
         for task, (cells, elapsed) in ordered:
@@ -185,7 +198,7 @@ def run_sweep(
             results["groups"][key] = {
                 "strategy": task.strategy,
                 "magnitude_n": task.magnitude,
-                "backend": resolve_backend_name(cfg.backend),
+                "backend": cfg.backend_name(),
                 "elapsed_s": round(elapsed, 2),
                 "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
             }
@@ -207,8 +220,8 @@ class GroupTask:
 
 
 class GroupWorker:
-    """Loads the library's switching setup once; called with a :class:`GroupTask`, it runs that group on a fresh
-    simulator and returns its cells and its wall-clock time, s. Its results are a pure function of the task, the
+    """Loads the library's switching setup (and the gap's robot) once; called with a :class:`GroupTask`, it runs that
+    group on a fresh simulator and returns its cells and its wall-clock time, s. Its results are a pure function of the task, the
     settings and the library (the group's seed derives from the sweep's seed and the magnitude). Built with keyword
     arguments only, so that Ray can build it in an actor."""
 
@@ -220,6 +233,7 @@ class GroupWorker:
         if self._setup.resources.library.identities(self._setup.gaits) != identities:
             raise GaitlibError(f"the library at {library} holds other policies than the sweep's (identities)")
         self._pairs, self._cfg, self._progress = [tuple(p) for p in pairs], config, progress
+        self._robot = config.gap.robot_spec()
 
     def __call__(self, task: GroupTask) -> tuple[dict[tuple[str, str], CellCounts], float]:
         start, key = time.perf_counter(), group_key(task.strategy, task.magnitude)
@@ -228,7 +242,7 @@ class GroupWorker:
             if self._progress is not None:
                 self._progress(key, finished)
 
-        cells = _run_group(self._setup, task.strategy, task.magnitude, self._pairs, self._cfg, report)
+        cells = _run_group(self._setup, self._robot, task, self._pairs, self._cfg, report)
         return cells, time.perf_counter() - start
 
 
@@ -244,23 +258,24 @@ def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
 
 def _run_group(
     setup: SwitchingSetup,
-    strategy: str,
-    magnitude: float,
+    robot: RobotSpec,
+    task: GroupTask,
     pairs: Sequence[tuple[str, str]],
     cfg: SweepConfig,
     report: Callable[[int], None],
 ) -> dict[tuple[str, str], CellCounts]:
-    """All transitions of one strategy at one push magnitude."""
+    """All transitions of one strategy at one push magnitude, on ``robot``."""
     # Every strategy meets the same random draws at a magnitude (common random numbers: differences between
     # strategies are not blurred by different worlds), and each magnitude its own.
+    magnitude = task.magnitude
     seed = int(np.random.SeedSequence([cfg.seed, round(magnitude * 1000)]).generate_state(1)[0])
-    sim = make_backend(cfg.backend, num_worlds=cfg.num_worlds, device=cfg.device)
+    sim = make_backend(cfg.backend_name(), num_worlds=cfg.num_worlds, robot=robot, device=cfg.device)
     try:
         pushes = PushConfig(
             max_force=magnitude, fixed_force=True, duration=cfg.push_duration_s, interval=cfg.push_interval_s
         )
-        env = setup.make_env(sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
-        controller = setup.controller(env, strategy, deadline_s=cfg.deadline_s, seed=seed)
+        env = cfg.gap.make_env(setup, sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
+        controller = setup.controller(env, task.strategy, deadline_s=cfg.deadline_s, seed=seed)
         return _Group(env, controller, pairs, setup, cfg, seed, report).run()
     finally:
         sim.close()

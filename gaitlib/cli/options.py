@@ -22,6 +22,7 @@ __all__ = [
     "EPISODE_SECONDS",
     "MAX_MAGNITUDES",
     "MEASURE_SECONDS",
+    "MOTOR_STRENGTH",
     "PUSH_N",
     "DELAY_STEPS",
     "SEED",
@@ -101,6 +102,8 @@ EPISODE_SECONDS = Bounds(low=0, high=600, unit="s", low_open=True)
 """Simulated lengths of a run or an evaluation episode, s."""
 DELAY_STEPS = Bounds(low=0, high=10, whole=True)
 """Action delays, control steps (10: a third of a second at 30 Hz)."""
+MOTOR_STRENGTH = Bounds(low=0, high=10, low_open=True)
+"""Multiples of the PD torque the motors deliver (1: as modelled)."""
 MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
 WORKERS = Bounds(low=1, high=4096, whole=True)

@@ -10,8 +10,10 @@ import typer
 
 from gaitlib.cli.options import (
     COUNT,
+    DELAY_STEPS,
     EPISODE_SECONDS,
     MAX_MAGNITUDES,
+    MOTOR_STRENGTH,
     PUSH_N,
     SEED,
     WORLDS,
@@ -122,13 +124,27 @@ def benchmark_command(
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (success per strategy, pair, N)."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    robot: Path | None = typer.Option(
+        None, "--robot", help="Run on another A1 model, an MJCF file (e.g. MuJoCo Menagerie's unitree_a1), adapted in "
+        "memory (docs/robot.md); mujoco backend."
+    ),
+    action_delay: int | None = bounded(
+        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
+        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
+    ),
+    motor_strength: float = bounded(
+        1.0, "--motor-strength", help="Multiple of the PD torque the motors deliver, kp, kd and torque limit alike "
+        "(mujoco backend);", bounds=MOTOR_STRENGTH,
+    ),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),
     workers: int | None = workers_option(),
 ) -> None:
-    """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot."""
+    """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot.
+    With --robot, --action-delay, --motor-strength: on a stand-in for the real robot (Fig. 4, bottom)."""
     from rich.console import Console
 
+    from gaitlib.benchmark.gap import DeploymentGap
     from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
     from gaitlib.benchmark.sweep import SweepConfig, run_sweep
     from gaitlib.cli.options import check_worlds, cluster_config, parse_magnitudes, parse_pairs
@@ -138,6 +154,10 @@ def benchmark_command(
     from gaitlib.strategies import get_strategy
 
     cluster = cluster_config(ray, address, workers)
+    gap = DeploymentGap(robot=robot and str(robot), action_delay=action_delay, motor_strength=motor_strength)
+    if gap.needs_mujoco:
+        backend = gap.backend_name(backend)  # auto: mujoco; newton: refused in one line
+        gap.robot_spec()  # a model without the A1's joints, feet or ground: refused in one line, before any work
     check_worlds("--worlds", worlds, backend=backend)
     swept = parse_magnitudes(magnitudes)
     setup = load_switching(library)
@@ -150,6 +170,7 @@ def benchmark_command(
         samples=samples,
         pairs=parse_pairs(pairs, list(setup.gaits)),
         num_worlds=worlds,
+        gap=gap,
         backend=backend,
         seed=seed,
     )
