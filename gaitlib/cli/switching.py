@@ -191,12 +191,23 @@ def benchmark_command(
     if not rows:
         raise GaitlibError("the benchmark produced no results")
     write_csv(out / "results.csv", rows)
-    plot = write_plot(out / "success.png", rows, title=f"{samples} transitions per point, 95% Wilson intervals")
+    title = f"{samples} transitions per point, 95% Wilson intervals" + _gap_title(gap)
+    plot = write_plot(out / "success.png", rows, title=title)
     facts = summary(rows)
     if as_json:
         print(json.dumps({"success": success_table(rows), "summary": facts, "out": str(out)}))
         return
     _print_summary(facts, out, plot)
+
+
+def _gap_title(gap) -> str:
+    """What the plot's title adds for a deployment gap: the robot file, the delay, the motor strength."""
+    parts = [f"on {Path(gap.robot).name}"] if gap.robot else []
+    if gap.action_delay is not None:
+        parts.append(f"action delay {gap.action_delay} steps")
+    if gap.motor_strength != 1.0:
+        parts.append(f"motor strength {gap.motor_strength:g}")
+    return "".join(f"; {part}" for part in parts)
 
 
 def _print_summary(facts: dict, out: Path, plot: Path) -> None:
