@@ -19,6 +19,7 @@ from gaitlib.envs import EnvConfig
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.errors import GaitlibError, SimulationError
 from gaitlib.meta import load_switching
+from gaitlib.robots import get_robot
 from gaitlib.robots.a1 import constants as a1
 from gaitlib.robots.variant import load_variant, model_sha256
 from gaitlib.sim import make_backend, standing_state
@@ -214,3 +215,9 @@ def test_a_gap_without_the_mujoco_backend_is_refused() -> None:
         DeploymentGap(motor_strength=0.8).backend_name("newton")
     assert DeploymentGap(motor_strength=0.8).backend_name("auto") == "mujoco"
     assert DeploymentGap(action_delay=2).settings() == {"action_delay": 2} and DeploymentGap().settings() == {}
+
+
+def test_an_adapted_robot_is_refused_by_the_newton_backend() -> None:
+    spec = dataclasses.replace(get_robot("a1"), motor_strength=0.8)
+    with pytest.raises(SimulationError, match="runs on the mujoco backend only"):
+        make_backend("newton", num_worlds=1, robot=spec)

@@ -245,7 +245,8 @@ def test_platt_recovers_the_map_the_labels_were_drawn_from() -> None:
     assert (a, b) == (pytest.approx(2.0, abs=0.1), pytest.approx(-1.0, abs=0.1))
     # A weight is a repeated sample; and a pair that never fails keeps finite parameters.
     few, labels = np.array([0.3, 0.6, 0.8]), np.array([False, True, True])
-    assert platt(few, labels, np.array([1.0, 2.0, 1.0])) == pytest.approx(platt(few[[0, 1, 1, 2]], labels[[0, 1, 1, 2]]))
+    repeated = [0, 1, 1, 2]
+    assert platt(few, labels, np.array([1.0, 2.0, 1.0])) == pytest.approx(platt(few[repeated], labels[repeated]))
     assert all(math.isfinite(v) for v in platt(few, np.ones(3, dtype=bool)))
 
 

@@ -45,7 +45,9 @@ class DeploymentGap:
 
     def __post_init__(self) -> None:
         if self.action_delay is not None and not 0 <= self.action_delay <= MAX_ACTION_DELAY:
-            raise GaitlibError(f"the action delay must be 0 to {MAX_ACTION_DELAY} control steps, got {self.action_delay}")
+            raise GaitlibError(
+                f"the action delay must be 0 to {MAX_ACTION_DELAY} control steps, got {self.action_delay}"
+            )
         if not (math.isfinite(self.motor_strength) and self.motor_strength > 0):
             raise GaitlibError(f"the motor strength must be a positive finite number, got {self.motor_strength:g}")
         if self.robot is not None:
@@ -89,9 +91,4 @@ class DeploymentGap:
 
     def make_env(self, setup: SwitchingSetup, sim: SimBackend, cfg: EnvConfig, *, seed: int) -> ImitationEnv:
         """``setup.make_env(sim, cfg)``, with every world's action delay fixed at :attr:`action_delay` if set."""
-        if self.action_delay is None:
-            return setup.make_env(sim, cfg, seed=seed)
-        fixed = setup.resources.library.shared_policy_settings(setup.gaits).env_config(cfg)
-        delay = (self.action_delay, self.action_delay)
-        fixed = dataclasses.replace(fixed, randomization=dataclasses.replace(fixed.randomization, action_delay_steps=delay))
-        return ImitationEnv(sim, [e.clip for e in setup.entries], fixed, seed=seed)
+        return setup.make_env(sim, cfg, seed=seed, action_delay=self.action_delay)

@@ -221,9 +221,9 @@ class GroupTask:
 
 class GroupWorker:
     """Loads the library's switching setup (and the gap's robot) once; called with a :class:`GroupTask`, it runs that
-    group on a fresh simulator and returns its cells and its wall-clock time, s. Its results are a pure function of the task, the
-    settings and the library (the group's seed derives from the sweep's seed and the magnitude). Built with keyword
-    arguments only, so that Ray can build it in an actor."""
+    group on a fresh simulator and returns its cells and its wall-clock time, s. Its results are a pure function of
+    the task, the settings and the library (the group's seed derives from the sweep's seed and the magnitude). Built
+    with keyword arguments only, so that Ray can build it in an actor."""
 
     def __init__(self, *, library: str, identities: dict, pairs: list, config: SweepConfig, setup=None,
                  progress: Callable[[str, int], None] | None = None) -> None:

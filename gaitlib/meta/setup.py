@@ -38,11 +38,18 @@ class SwitchingSetup:
             raise UnknownNameError("gait", name, list(self.gaits))
         return self.gaits.index(name)
 
-    def make_env(self, sim: SimBackend, cfg: EnvConfig | None = None, *, seed: int = 0) -> ImitationEnv:
-        """An environment of every gait on ``sim``, with the policies' action and observation settings (``cfg`` for
-        the rest)."""
-        settings = self.resources.library.shared_policy_settings(self.gaits)
-        return ImitationEnv(sim, [e.clip for e in self.entries], settings.env_config(cfg or EnvConfig()), seed=seed)
+    def make_env(
+        self, sim: SimBackend, cfg: EnvConfig | None = None, *, seed: int = 0, action_delay: int | None = None
+    ) -> ImitationEnv:
+        """An environment of every gait on ``sim``, with the policies' action and observation settings and their
+        trained action delay (``action_delay``: every action waits exactly this many control steps instead), and
+        ``cfg`` for the rest."""
+        cfg = self.resources.library.shared_policy_settings(self.gaits).env_config(cfg or EnvConfig())
+        if action_delay is not None:
+            delay = (action_delay, action_delay)
+            randomization = dataclasses.replace(cfg.randomization, action_delay_steps=delay)
+            cfg = dataclasses.replace(cfg, randomization=randomization)
+        return ImitationEnv(sim, [e.clip for e in self.entries], cfg, seed=seed)
 
     def controller(
         self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0

@@ -165,7 +165,8 @@ def _find(model: mujoco.MjModel, path: Path) -> _Layout:
     if model.nq != 19 or model.jnt_qposadr[free[0]] != 0 or list(model.jnt_qposadr[joints]) != list(range(7, 19)):
         raise SimulationError(f"robot model {path} has other joints than the A1's, or its joints in another order "
                               "than FR, FL, RR, RL x (hip, thigh, calf) after the trunk's free joint")
-    planes = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0 and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    plane = mujoco.mjtGeom.mjGEOM_PLANE
+    planes = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0 and model.geom_type[g] == plane]
     if not planes:
         raise SimulationError(f"robot model {path} has no ground: a plane geom in the worldbody")
     data = mujoco.MjData(model)

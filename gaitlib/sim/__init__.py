@@ -74,4 +74,10 @@ def make_backend(
     spec = get_robot(robot) if isinstance(robot, str) else robot
     if not spec.mjcf_path.is_file():
         raise SimulationError(f"robot model file not found: {spec.mjcf_path}")
-    return _BACKENDS.get(resolve_backend_name(name))(spec, num_worlds, device=device)
+    backend = resolve_backend_name(name)
+    adapted = spec.build_model is not None or spec.stance_contact_geoms or spec.motor_strength != 1.0
+    if backend != "mujoco" and adapted:
+        raise SimulationError(
+            f"robot '{spec.name}' (an adapted model, stance geoms or a motor strength) runs on the mujoco backend only"
+        )
+    return _BACKENDS.get(backend)(spec, num_worlds, device=device)
