@@ -1,6 +1,6 @@
 """Atomic file writes: the one way gaitlib writes a result file, so that a crash, Ctrl-C or a full disk never
-leaves a half-written file where a good one (or none) was; and the one writer lock, so that two processes never
-write the same result."""
+leaves a half-written file where a good one (or none) was; the one writer lock, so that two processes never
+write the same result; and the one reader of gaitlib's versioned JSON files."""
 
 from __future__ import annotations
 
@@ -11,12 +11,13 @@ import json
 import os
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 __all__ = [
     "atomic_path",
     "fsync_folder",
+    "read_json",
     "release_lock",
     "save_figure",
     "stale_temporaries",
@@ -81,6 +82,23 @@ def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:
             json.dump(payload, handle, indent=indent)
             handle.write("\n")
     return Path(path)
+
+
+def read_json(path: Path, *, header: Mapping[str, object], what: str, error: type[Exception]) -> dict:
+    """The JSON object in ``path`` (which exists) whose ``format`` and ``format_version`` are ``header``'s; raises
+    ``error`` with one line otherwise. ``what`` names the kind of file with its article (``"a gaitlib TMT"``)."""
+    try:
+        payload = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as failure:
+        raise error(f"{path} is not readable as {what} ({type(failure).__name__})") from failure
+    if not isinstance(payload, dict) or payload.get("format") != header["format"]:
+        raise error(f"{path} is not {what}")
+    if payload.get("format_version") != header["format_version"]:
+        raise error(
+            f"{path} is {what} of format version {payload.get('format_version')}; "
+            f"this gaitlib reads version {header['format_version']}"
+        )
+    return payload
 
 
 def save_figure(fig, path: Path, *, dpi: int = 110) -> Path:

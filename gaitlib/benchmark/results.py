@@ -3,9 +3,9 @@ with given settings (a rerun resumes only a sweep of the same settings and polic
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+from gaitlib.atomic import read_json
 from gaitlib.errors import GaitlibError
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "group_key", "load_results", "open_results"]
@@ -25,14 +25,8 @@ def load_results(out: Path) -> dict:
     path = Path(out) / "results.json"
     if not path.is_file():
         return {}
-    try:
-        results = json.loads(path.read_text())
-    except (OSError, ValueError) as error:
-        raise GaitlibError(f"{path} is not readable benchmark results ({type(error).__name__})") from error
-    if not isinstance(results, dict) or results.get("format") != FORMAT_NAME:
-        raise GaitlibError(f"{path} is not gaitlib benchmark results")
-    if results.get("format_version") != FORMAT_VERSION:
-        raise GaitlibError(f"{path} is not gaitlib benchmark results of format version {FORMAT_VERSION}")
+    header = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION}
+    results = read_json(path, header=header, what="gaitlib benchmark results", error=GaitlibError)
     if not all(isinstance(results.get(key), dict) for key in ("settings", "library_identities", "groups")):
         raise GaitlibError(f"{path} is damaged benchmark results (settings, identities or groups missing)")
     return results

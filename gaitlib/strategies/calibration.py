@@ -13,14 +13,13 @@ finite parameters. It is fitted on collection data, never on benchmark runs, and
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from gaitlib.atomic import write_json
+from gaitlib.atomic import read_json, write_json
 from gaitlib.errors import TransitionDataError
 from gaitlib.training.library import check_identities
 from gaitlib.transition_net import TransitionNet, batch_features
@@ -128,10 +127,8 @@ def load_calibration(path: Path, *, identities: dict[str, str]) -> Calibration:
     path = Path(path)
     if not path.is_file():
         raise TransitionDataError(f"no net calibration at {path} (run gaitlib fit again)")
+    payload = read_json(path, header=FORMAT, what="a gaitlib net calibration", error=TransitionDataError)
     try:
-        payload = json.loads(path.read_text())
-        if {k: payload.get(k) for k in FORMAT} != FORMAT:
-            raise ValueError("not a gaitlib net calibration of this version")
         gaits = tuple(payload["gaits"])
         index = {name: i for i, name in enumerate(gaits)}
         pairs = {}
@@ -139,7 +136,7 @@ def load_calibration(path: Path, *, identities: dict[str, str]) -> Calibration:
             m, _, n = text.partition("-")
             pairs[(index[m], index[n])] = (float(ab["a"]), float(ab["b"]))
         calibration = Calibration(gaits, dict(payload["library_identities"]), pairs, dict(payload["info"]))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
-        raise TransitionDataError(f"{path} is not a readable net calibration ({error}); run gaitlib fit") from error
+    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        raise TransitionDataError(f"{path} is a damaged net calibration ({error!r}); run gaitlib fit") from error
     check_identities(calibration.identities, identities, what=f"net calibration {path}")
     return calibration

@@ -14,7 +14,6 @@ transition-net, refused at load time when the library's policies are not the one
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gaitlib.atomic import write_json
+from gaitlib.atomic import read_json, write_json
 from gaitlib.errors import TransitionDataError
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
 from gaitlib.training.library import check_identities
@@ -175,16 +174,8 @@ def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:
     path = Path(path)
     if not path.is_file():
         raise TransitionDataError(f"no TMT at {path} (run gaitlib fit)")
-    try:
-        payload = json.loads(path.read_text())
-    except (OSError, ValueError) as error:
-        raise TransitionDataError(f"{path} is not a readable TMT ({type(error).__name__})") from error
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT_NAME:
-        raise TransitionDataError(f"{path} is not a gaitlib TMT")
-    if payload.get("format_version") != FORMAT_VERSION:
-        raise TransitionDataError(
-            f"TMT {path} has format version {payload.get('format_version')}; this gaitlib reads {FORMAT_VERSION}"
-        )
+    header = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION}
+    payload = read_json(path, header=header, what="a gaitlib TMT", error=TransitionDataError)
     try:
         table = _from_payload(payload)
     except (KeyError, TypeError, ValueError, AttributeError) as error:
