@@ -1,5 +1,6 @@
 """Measure a library's gaits against the quality bar: `gaitlib eval` without pushes, with pushes of up to 50, 100 and
-150 N, and with every action one control step (33 ms) late; one JSON line per run, then a markdown table.
+150 N, and with every action on time or one control step (33 ms) late (the other runs draw 0 or 1 step per
+episode, as training did); one JSON line per run, then a markdown table.
 
     python benchmarks/gait_quality.py --library library [--gaits trot,pace] [--episodes 256] [--out quality.json]
 
@@ -20,7 +21,7 @@ from gaitlib.training import Library
 from gaitlib.training.evaluate import evaluate_policy
 
 RUNS = (("no pushes", 0.0, None), ("push <= 50 N", 50.0, None), ("push <= 100 N", 100.0, None),
-        ("push <= 150 N", 150.0, None), ("action 1 step late", 0.0, 1))
+        ("push <= 150 N", 150.0, None), ("action on time", 0.0, 0), ("action 1 step late", 0.0, 1))
 """(label, largest push N, fixed action delay in control steps or None for training's random 0-1)."""
 
 
