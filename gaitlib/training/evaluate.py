@@ -82,46 +82,19 @@ def evaluate_policy(
     sim = make_backend(backend, num_worlds=episodes)
     try:
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
-        n, steps = env.num_envs, env.max_episode_length
-        alive = torch.ones(n, dtype=torch.bool, device=env.device)
-        fell = torch.zeros(n, dtype=torch.bool, device=env.device)
-        turned = torch.zeros(n, dtype=torch.bool, device=env.device)
-        alive_steps = torch.zeros(n, device=env.device)
-        sq_error = torch.zeros(n, device=env.device)
-        speed = torch.zeros(n, device=env.device)
-        ref_speed = torch.zeros(n, device=env.device)
-        start_yaw = yaw_of(env.sim_state.root_quat)
-        heading_change = torch.zeros(n, device=env.device)
-        obs = env.get_observations()
-        for _ in range(steps):
-            obs, _, dones, extras = env.step(policy.act(obs))
-            s, ref = env.sim_state, env.reference.frame()
-            # The rows of worlds that just finished hold their reset state: count only those still alive.
-            ended = dones & alive
-            fell |= ended & ~extras["time_outs"]
-            alive &= ~dones
-            live = alive.float()
-            yaw = yaw_of(s.root_quat)
-            change = torch.remainder(yaw - start_yaw + torch.pi, 2 * torch.pi) - torch.pi
-            heading_change = torch.where(alive, change.abs(), heading_change)
-            turned |= alive & (change.abs() > torch.pi / 2)
-            heading = quat_from_yaw(yaw)
-            sq_error += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
-            speed += live * quat_rotate_inverse(heading, s.root_lin_vel)[:, 0]
-            ref_speed += live * ref.heading_lin_vel[:, 0]
-            alive_steps += live + ended.float()
-        counted = alive_steps.clamp(min=1)
-        total_alive = alive_steps.sum().clamp(min=1)
-        mean_speed = float(speed.sum() / total_alive)
-        mean_ref = float(ref_speed.sum() / total_alive)
+        t = _run_episodes(env, policy)
+        counted = t["alive_steps"].clamp(min=1)
+        total_alive = t["alive_steps"].sum().clamp(min=1)
+        mean_speed = float(t["speed"].sum() / total_alive)
+        mean_ref = float(t["ref_speed"].sum() / total_alive)
         error = abs(mean_speed - mean_ref)
         return EvalResult(
-            episodes=n,
+            episodes=env.num_envs,
             seconds=seconds,
-            fall_rate=float(fell.float().mean()),
-            heading_loss_rate=float(turned.float().mean()),
-            median_heading_change_deg=float(torch.rad2deg(heading_change).median()),
-            joint_rmse=float(torch.sqrt(sq_error.sum() / total_alive)),
+            fall_rate=float(t["fell"].float().mean()),
+            heading_loss_rate=float(t["turned"].float().mean()),
+            median_heading_change_deg=float(torch.rad2deg(t["heading_change"]).median()),
+            joint_rmse=float(torch.sqrt(t["sq_error"].sum() / total_alive)),
             forward_speed=mean_speed,
             reference_speed=mean_ref,
             speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
@@ -131,3 +104,32 @@ def evaluate_policy(
         )
     finally:
         sim.close()
+
+
+def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
+    """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, turned (more than 90
+    degrees from its start while up), alive steps, summed squared joint error, forward and reference speed, and the
+    last absolute heading change while up, rad."""
+    n, dev = env.num_envs, env.device
+    alive = torch.ones(n, dtype=torch.bool, device=dev)
+    t = {"fell": torch.zeros(n, dtype=torch.bool, device=dev), "turned": torch.zeros(n, dtype=torch.bool, device=dev)}
+    t |= {k: torch.zeros(n, device=dev) for k in ("alive_steps", "sq_error", "speed", "ref_speed", "heading_change")}
+    start_yaw = yaw_of(env.sim_state.root_quat)
+    obs = env.get_observations()
+    for _ in range(env.max_episode_length):
+        obs, _, dones, extras = env.step(policy.act(obs))
+        s, ref = env.sim_state, env.reference.frame()
+        # The rows of worlds that just finished hold their reset state: count only those still alive.
+        ended = dones & alive
+        t["fell"] |= ended & ~extras["time_outs"]
+        alive &= ~dones
+        live = alive.float()
+        yaw = yaw_of(s.root_quat)
+        change = torch.remainder(yaw - start_yaw + torch.pi, 2 * torch.pi) - torch.pi
+        t["heading_change"] = torch.where(alive, change.abs(), t["heading_change"])
+        t["turned"] |= alive & (change.abs() > torch.pi / 2)
+        t["sq_error"] += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
+        t["speed"] += live * quat_rotate_inverse(quat_from_yaw(yaw), s.root_lin_vel)[:, 0]
+        t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
+        t["alive_steps"] += live + ended.float()
+    return t
