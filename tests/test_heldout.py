@@ -149,10 +149,11 @@ def test_the_motor_strength_scales_gains_and_torque_limit(variant_file) -> None:
         sim.close()
 
 
-MENAGERIE = Path(os.environ.get("GAITLIB_MENAGERIE_A1", "/work/shared/reference/unitree_a1/scene_nomesh.xml"))
+MENAGERIE = Path(os.environ.get("GAITLIB_MENAGERIE_A1", ""))
+"""MuJoCo Menagerie's unitree_a1 scene (github.com/google-deepmind/mujoco_menagerie), where a machine has it."""
 
 
-@pytest.mark.skipif(not MENAGERIE.is_file(), reason="MuJoCo Menagerie's unitree_a1 (meshless) is not on this machine")
+@pytest.mark.skipif(not MENAGERIE.is_file(), reason="set GAITLIB_MENAGERIE_A1 to MuJoCo Menagerie's unitree_a1 scene")
 def test_menagerie_a1_stands_on_its_calves_without_falling() -> None:
     robot = load_variant(MENAGERIE)
     assert len(robot.stance_contact_geoms) == 4
