@@ -60,6 +60,14 @@ def test_the_net_margin_has_a_hand_computed_interval() -> None:
     # variance of each mean: (p1 (1 - p1) / 100 + p2 (1 - p2) / 100) / 2^2
     variance = (0.09 / 100 + 0.25 / 100) / 4 + (0.16 / 100 + 0.24 / 100) / 4
     assert margin["ci95_pp"] == pytest.approx(100 * 1.959964 * variance**0.5, rel=1e-6)
+    rows += [cell("random", 0, 70), cell("random", 100, 30)]  # below tmt: not the second best, still reported
+    facts = summary(rows)
+    assert facts["net_margin"]["trot-stand"]["second_best"] == "tmt"
+    over_random = facts["net_over_random"]["trot-stand"]
+    assert over_random["margin_pp"] == pytest.approx(20.0)
+    variance = (0.09 / 100 + 0.25 / 100) / 4 + (0.21 / 100 + 0.21 / 100) / 4
+    assert over_random["ci95_pp"] == pytest.approx(100 * 1.959964 * variance**0.5, rel=1e-6)
+    assert "pace-stand" not in facts["net_over_random"]  # no net there
 
 
 def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) -> None:

@@ -83,10 +83,10 @@ def success_table(rows: list[CellResult]) -> dict[str, dict[str, dict[str, float
 
 
 def summary(rows: list[CellResult]) -> dict:
-    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and per pair the margin
-    of ``net`` over the best other strategy (percentage points) with the half-width of its 95% interval (normal
-    approximation, the two strategies' cells taken as independent binomials: conservative under the sweep's common
-    random numbers), where those exist."""
+    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and per pair the margins
+    of ``net`` over the best other strategy and over ``random`` (percentage points), each with the half-width of its
+    95% interval (normal approximation, the two strategies' cells taken as independent binomials: conservative
+    under the sweep's common random numbers), where those exist."""
     means: dict[str, dict[str, float]] = {}
     variances: dict[str, dict[str, float]] = {}  # of each mean
     for strategy in dict.fromkeys(r.strategy for r in rows):
@@ -97,20 +97,28 @@ def summary(rows: list[CellResult]) -> dict:
         means[strategy] = {pair: sum(r.success_rate for r in v) / len(v) for pair, v in per_pair.items()}
         variances[strategy] = {pair: _variance_of_mean(v) for pair, v in per_pair.items()}
     overall = {s: sum(p.values()) / len(p) for s, p in means.items()}
-    margins = {}
+    margins, over_random = {}, {}
     if "net" in means:
         for pair, value in means["net"].items():
             others = [(means[s][pair], s) for s in means if s != "net" and pair in means[s]]
             if others:
-                best, name = max(others)
-                half = _Z95 * math.sqrt(variances["net"][pair] + variances[name][pair])
-                margins[pair] = {"second_best": name, "margin_pp": 100 * (value - best), "ci95_pp": 100 * half}
+                name = max(others)[1]
+                margins[pair] = {"second_best": name, **_margin(means, variances, pair, name)}
+            if pair in means.get("random", {}):
+                over_random[pair] = _margin(means, variances, pair, "random")
     return {
         "mean_success": means,
         "overall": overall,
         "ranking": sorted(overall, key=overall.get, reverse=True),
         "net_margin": margins,
+        "net_over_random": over_random,
     }
+
+
+def _margin(means: dict, variances: dict, pair: str, other: str) -> dict:
+    """``net``'s mean success on ``pair`` less ``other``'s, in percentage points, with its 95% half-width."""
+    half = _Z95 * math.sqrt(variances["net"][pair] + variances[other][pair])
+    return {"margin_pp": 100 * (means["net"][pair] - means[other][pair]), "ci95_pp": 100 * half}
 
 
 def _variance_of_mean(cells: list[CellResult]) -> float:

@@ -234,4 +234,8 @@ def _print_summary(facts: dict, out: Path, plot: Path) -> None:
             f"net vs {margin['second_best']} on {pair}: {margin['margin_pp']:+.1f} "
             f"± {margin['ci95_pp']:.1f} percentage points (95%)"
         )
+    for pair, margin in facts["net_over_random"].items():
+        console.print(
+            f"net vs random on {pair}: {margin['margin_pp']:+.1f} ± {margin['ci95_pp']:.1f} percentage points (95%)"
+        )
     console.print(f"results: {out / 'results.csv'}, {out / 'results.json'}; plot: {plot}")
