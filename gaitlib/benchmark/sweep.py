@@ -47,6 +47,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.meta import DEADLINE_S, SwitchingSetup
 from gaitlib.robots import RobotSpec
 from gaitlib.sim import make_backend
+from gaitlib.transitions import SUCCESS_HORIZON_S
 
 __all__ = [
     "MAGNITUDE_RESOLUTION_N",
@@ -87,8 +88,8 @@ class SweepConfig:
     """Shortest source run after a reset before the request, s."""
     source_extra_s: float = 1.0
     """Further source run, uniform in [0, this], s (spreads the source phase at the request)."""
-    horizon_s: float = 2.0
-    """Time after the switch without a fall that makes a success, s."""
+    horizon_s: float = SUCCESS_HORIZON_S
+    """Time after the switch without a fall that makes a success, s (the collection's label horizon)."""
     deadline_s: float = DEADLINE_S
     """A request not acted on within this time is forced, s."""
     push_duration_s: tuple[float, float] = (0.1, 0.3)

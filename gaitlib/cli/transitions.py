@@ -41,10 +41,11 @@ def collect_command(
         None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it."
     ),
     push_max: float = bounded(0.0, "--push-max", help="Largest random push (0: none);", bounds=PUSH_N),
-    horizon: float = bounded(
-        2.0,
+    horizon: float | None = bounded(
+        None,
         "--horizon",
-        help="Time after the switch that decides success;",
+        help="Time after the switch that decides success (default: the success horizon chosen from data, "
+        "docs/transitions.md);",
         bounds=Bounds(low=0, high=60, unit="s", low_open=True),
     ),
     worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
@@ -66,7 +67,7 @@ def collect_command(
     from gaitlib.cli.options import check_worlds, cluster_config, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import Library
-    from gaitlib.transitions import CollectConfig, collect
+    from gaitlib.transitions import SUCCESS_HORIZON_S, CollectConfig, collect
 
     cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
@@ -75,7 +76,7 @@ def collect_command(
     config = CollectConfig(
         samples=int(samples),
         num_worlds=worlds,
-        horizon_s=horizon,
+        horizon_s=SUCCESS_HORIZON_S if horizon is None else horizon,
         push_max=push_max,
         pairs=parse_pairs(pairs, names),
         backend=backend,

@@ -1,7 +1,7 @@
 """Transition samples: the HDF5 schema they are stored in (crash-safe, one writer at a time), the explicit state,
 and the collector that draws them by switching library policies at random moments and phases."""
 
-from gaitlib.transitions.collector import CollectConfig, CollectProgress, CollectResult, collect
+from gaitlib.transitions.collector import SUCCESS_HORIZON_S, CollectConfig, CollectProgress, CollectResult, collect
 from gaitlib.transitions.combine import read_all
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT, explicit_state
 from gaitlib.transitions.schema import (
@@ -20,6 +20,7 @@ __all__ = [
     "EXPLICIT_LAYOUT",
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
+    "SUCCESS_HORIZON_S",
     "CollectConfig",
     "CollectProgress",
     "CollectResult",

@@ -62,7 +62,11 @@ from gaitlib.transitions import schema
 from gaitlib.transitions.cycle import ChunkTask, ChunkWorker
 from gaitlib.transitions.writer import open_writer
 
-__all__ = ["CollectConfig", "CollectProgress", "CollectResult", "collect"]
+__all__ = ["SUCCESS_HORIZON_S", "CollectConfig", "CollectProgress", "CollectResult", "collect"]
+
+SUCCESS_HORIZON_S = 2.5
+"""Default time after a switch within which no fall makes a success, s: the collection's label and the
+benchmark's judgement alike (``docs/transitions.md``, "The success horizon", says how it was chosen)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,7 +78,7 @@ class CollectConfig:
     """Samples the file holds when collection ends (a resumed run continues up to this count)."""
     num_worlds: int = 64
     """Parallel worlds."""
-    horizon_s: float = 2.0
+    horizon_s: float = SUCCESS_HORIZON_S
     """Time after the switch within which no termination means success, s."""
     warmup_s: float = 1.0
     """Shortest time the source policy runs after a reset before it may be switched, s."""
