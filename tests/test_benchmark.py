@@ -115,17 +115,18 @@ def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) ->
 
 
 def test_pushes_come_only_inside_the_disturbance_window(tmp_path) -> None:
-    setup = load_switching(None)  # the shipped library: trained policies: without pushes the robot stays up
+    setup = load_switching(None)  # the shipped library: unpushed, 99% of its pace-to-stand switches stay up
     base = dataclasses.replace(
-        TINY, strategies=("random",), magnitudes=(1500.0,), samples=8, num_worlds=8, push_lead_s=0.0
+        TINY, strategies=("random",), magnitudes=(1500.0,), pairs=(("pace", "stand"),), samples=8, num_worlds=8,
+        push_lead_s=0.0,
     )
     # The quiet time before the first push (0.2-1.0 s) outlasts a 0.1 s window: no push ever lands.
     calm = run_sweep(tmp_path / "calm", setup, dataclasses.replace(base, deadline_s=0.1))
     # A 1.2 s window always holds one, and no 12.45 kg robot rides out a push of 1,500 N.
     pushed = run_sweep(tmp_path / "pushed", setup, dataclasses.replace(base, deadline_s=1.2, horizon_s=1.2))
-    for results, successes in ((calm, 8), (pushed, 0)):
-        cell = results["groups"]["random@1500"]["cells"]["trot-stand"]
-        assert cell["successes"] == successes
+    for results, successes in ((calm, range(7, 9)), (pushed, range(1))):
+        cell = results["groups"]["random@1500"]["cells"]["pace-stand"]
+        assert cell["successes"] in successes
         assert cell["source_falls"] == 0  # no push before the request with no lead
 
 
