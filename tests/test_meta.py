@@ -139,9 +139,9 @@ def test_run_episode_records_the_switch(shipped, strategy) -> None:
 def test_pushes_hit_only_inside_the_disturbance_window() -> None:
     request_s, deadline_s = 1.0, 0.5
     trace = run_episode(
-        load_switching(None),  # trained policies: the robot outlives the window
-        source="stand",
-        dest="trot",
+        load_switching(None),  # trained policies: the robot outlives the window (pace to stand: 99% at 0 N)
+        source="pace",
+        dest="stand",
         strategy="net",
         request_s=request_s,
         push_n=40.0,
