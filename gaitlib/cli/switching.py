@@ -29,7 +29,9 @@ __all__ = ["benchmark_command", "run_command"]
 def run_command(
     source: str = typer.Option("trot", "--from", help="Gait the robot starts in."),
     dest: str = typer.Option("stand", "--to", help="Gait requested."),
-    strategy: str = typer.Option("net", "--strategy", help="random, value, tmt, tmt-value, net or net-lookahead."),
+    strategy: str = typer.Option(
+        "net-lookahead", "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
+    ),
     request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s, in [0, --seconds)."),
     push: float = bounded(
         0.0,
