@@ -65,6 +65,9 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # Ctrl-C's default action, even where this suite runs as a background job (which inherits SIGINT ignored,
+        # and so would let the training run on)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     latest = runs / "checkpoints" / "latest.pt"
     deadline = time.monotonic() + 300
