@@ -55,19 +55,24 @@ def test_the_net_margin_has_a_hand_computed_interval() -> None:
 
     rows = [cell("net", 0, 90), cell("net", 100, 50), cell("tmt", 0, 80), cell("tmt", 100, 40)]
     rows.append(cell("random", 0, 100, pair="pace-stand"))  # better, but on another pair
-    margin = summary(rows)["net_margin"]["trot-stand"]
+    margin = summary(rows)["margins"]["net"]["trot-stand"]
     assert margin["second_best"] == "tmt" and margin["margin_pp"] == pytest.approx(10.0)
     # variance of each mean: (p1 (1 - p1) / 100 + p2 (1 - p2) / 100) / 2^2
     variance = (0.09 / 100 + 0.25 / 100) / 4 + (0.16 / 100 + 0.24 / 100) / 4
     assert margin["ci95_pp"] == pytest.approx(100 * 1.959964 * variance**0.5, rel=1e-6)
     rows += [cell("random", 0, 70), cell("random", 100, 30)]  # below tmt: not the second best, still reported
+    rows += [cell("net-lookahead", 0, 96), cell("net-lookahead", 100, 50)]
     facts = summary(rows)
-    assert facts["net_margin"]["trot-stand"]["second_best"] == "tmt"
-    over_random = facts["net_over_random"]["trot-stand"]
+    assert facts["margins"]["net"]["trot-stand"]["second_best"] == "net-lookahead"  # 73% against net's 70%
+    over_random = facts["margins"]["net"]["trot-stand"]["over_random"]
     assert over_random["margin_pp"] == pytest.approx(20.0)
     variance = (0.09 / 100 + 0.25 / 100) / 4 + (0.21 / 100 + 0.21 / 100) / 4
     assert over_random["ci95_pp"] == pytest.approx(100 * 1.959964 * variance**0.5, rel=1e-6)
-    assert "pace-stand" not in facts["net_over_random"]  # no net there
+    lookahead = facts["margins"]["net-lookahead"]["trot-stand"]  # every net strategy gets its own margins
+    assert lookahead["second_best"] == "net" and lookahead["margin_pp"] == pytest.approx(3.0)
+    assert lookahead["over_random"]["margin_pp"] == pytest.approx(23.0)
+    assert "pace-stand" not in facts["margins"]["net"]  # no net there
+    assert set(summary(rows, focus=("tmt",))["margins"]) == {"tmt"}
 
 
 def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) -> None:
@@ -105,7 +110,7 @@ def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) ->
     table = success_table(rows)
     assert set(table) == {"random", "net"} and set(table["net"]["trot-stand"]) == {"0", "300"}
     facts = summary(rows)
-    assert set(facts["ranking"]) == {"random", "net"} and "trot-stand" in facts["net_margin"]
+    assert set(facts["ranking"]) == {"random", "net"} and "trot-stand" in facts["margins"]["net"]
     write_csv(tmp_path / "r.csv", rows)
     with open(tmp_path / "r.csv") as handle:
         lines = list(csv.DictReader(handle))

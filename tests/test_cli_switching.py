@@ -77,18 +77,20 @@ def test_unknown_gait_or_strategy_is_one_error_line(switching_library) -> None:
 def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library, tmp_path) -> None:
     out = tmp_path / "bench"
     args = [
-        "benchmark", "--strategies", "random,tmt-value", "--magnitudes", "0:100:100", "--samples", "2", "--pairs",
+        "benchmark", "--strategies", "random,tmt-value,net-lookahead", "--magnitudes", "0:100:100", "--samples", "2", "--pairs",
         "stand-trot", "--worlds", "4", "--out", str(out), "--library", str(switching_library), "--backend", "mujoco",
     ]
     result = gaitlib(*args, "--json")
     assert result.returncode == 0, result.stderr
     success = json.loads(result.stdout)["success"]
-    assert set(success) == {"random", "tmt-value"}
+    assert set(success) == {"random", "tmt-value", "net-lookahead"}
     assert set(success["random"]) == {"stand-trot"} and set(success["random"]["stand-trot"]) == {"0", "100"}
     assert all(0.0 <= v <= 1.0 for v in success["tmt-value"]["stand-trot"].values())
     assert {p.name for p in out.iterdir()} >= {"results.json", "results.csv", "success.png"}
     again = gaitlib(*args)  # everything is done: it only reports
     assert again.returncode == 0 and "mean success over push magnitudes" in again.stdout
+    margin = next(line for line in again.stdout.splitlines() if line.startswith("net-lookahead on stand-trot: vs"))
+    assert "vs random" in margin and margin.endswith("percentage points (95%)"), again.stdout
 
 
 def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:

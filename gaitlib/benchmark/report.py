@@ -12,7 +12,16 @@ from pathlib import Path
 
 from gaitlib.atomic import atomic_path, save_figure
 
-__all__ = ["CellResult", "cell_results", "success_table", "summary", "wilson_interval", "write_csv", "write_plot"]
+__all__ = [
+    "NET_STRATEGIES",
+    "CellResult",
+    "cell_results",
+    "success_table",
+    "summary",
+    "wilson_interval",
+    "write_csv",
+    "write_plot",
+]
 
 _Z95 = 1.959963984540054
 
@@ -82,11 +91,15 @@ def success_table(rows: list[CellResult]) -> dict[str, dict[str, dict[str, float
     return table
 
 
-def summary(rows: list[CellResult]) -> dict:
-    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and per pair the margins
-    of ``net`` over the best other strategy and over ``random`` (percentage points), each with the half-width of its
-    95% interval (normal approximation, the two strategies' cells taken as independent binomials: conservative
-    under the sweep's common random numbers), where those exist."""
+NET_STRATEGIES = ("net", "net-lookahead")
+"""The strategies built on the transition-net, whose margins :func:`summary` reports by default."""
+
+
+def summary(rows: list[CellResult], *, focus: tuple[str, ...] = NET_STRATEGIES) -> dict:
+    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and for each strategy of
+    ``focus`` that ran, per pair, its margins over the best other strategy and over ``random`` (percentage points),
+    each with the half-width of its 95% interval (normal approximation, the two strategies' cells taken as
+    independent binomials: conservative under the sweep's common random numbers), where those exist."""
     means: dict[str, dict[str, float]] = {}
     variances: dict[str, dict[str, float]] = {}  # of each mean
     for strategy in dict.fromkeys(r.strategy for r in rows):
@@ -97,28 +110,29 @@ def summary(rows: list[CellResult]) -> dict:
         means[strategy] = {pair: sum(r.success_rate for r in v) / len(v) for pair, v in per_pair.items()}
         variances[strategy] = {pair: _variance_of_mean(v) for pair, v in per_pair.items()}
     overall = {s: sum(p.values()) / len(p) for s, p in means.items()}
-    margins, over_random = {}, {}
-    if "net" in means:
-        for pair, value in means["net"].items():
-            others = [(means[s][pair], s) for s in means if s != "net" and pair in means[s]]
-            if others:
-                name = max(others)[1]
-                margins[pair] = {"second_best": name, **_margin(means, variances, pair, name)}
-            if pair in means.get("random", {}):
-                over_random[pair] = _margin(means, variances, pair, "random")
+    margins: dict[str, dict[str, dict]] = {}
+    for strategy in (s for s in focus if s in means):
+        for pair in means[strategy]:
+            others = [(means[s][pair], s) for s in means if s != strategy and pair in means[s]]
+            if not others:
+                continue
+            second = max(others)[1]
+            margin = {"second_best": second, **_margin(means, variances, pair, strategy, second)}
+            if pair in means.get("random", {}) and strategy != "random":
+                margin["over_random"] = _margin(means, variances, pair, strategy, "random")
+            margins.setdefault(strategy, {})[pair] = margin
     return {
         "mean_success": means,
         "overall": overall,
         "ranking": sorted(overall, key=overall.get, reverse=True),
-        "net_margin": margins,
-        "net_over_random": over_random,
+        "margins": margins,
     }
 
 
-def _margin(means: dict, variances: dict, pair: str, other: str) -> dict:
-    """``net``'s mean success on ``pair`` less ``other``'s, in percentage points, with its 95% half-width."""
-    half = _Z95 * math.sqrt(variances["net"][pair] + variances[other][pair])
-    return {"margin_pp": 100 * (means["net"][pair] - means[other][pair]), "ci95_pp": 100 * half}
+def _margin(means: dict, variances: dict, pair: str, strategy: str, other: str) -> dict:
+    """``strategy``'s mean success on ``pair`` less ``other``'s, in percentage points, with its 95% half-width."""
+    half = _Z95 * math.sqrt(variances[strategy][pair] + variances[other][pair])
+    return {"margin_pp": 100 * (means[strategy][pair] - means[other][pair]), "ci95_pp": 100 * half}
 
 
 def _variance_of_mean(cells: list[CellResult]) -> float:

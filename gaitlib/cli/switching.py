@@ -231,13 +231,14 @@ def _print_summary(facts: dict, out: Path, plot: Path) -> None:
         )
     console = table_console()
     console.print(table)
-    for pair, margin in facts["net_margin"].items():
-        console.print(
-            f"net vs {margin['second_best']} on {pair}: {margin['margin_pp']:+.1f} "
-            f"± {margin['ci95_pp']:.1f} percentage points (95%)"
-        )
-    for pair, margin in facts["net_over_random"].items():
-        console.print(
-            f"net vs random on {pair}: {margin['margin_pp']:+.1f} ± {margin['ci95_pp']:.1f} percentage points (95%)"
-        )
+    for strategy, per_pair in facts["margins"].items():
+        for pair, margin in per_pair.items():
+            against = [(margin["second_best"], margin)]
+            if "over_random" in margin and margin["second_best"] != "random":
+                against.append(("random", margin["over_random"]))
+            console.print(
+                f"{strategy} on {pair}: "
+                + "; ".join(f"vs {name} {m['margin_pp']:+.1f} ± {m['ci95_pp']:.1f}" for name, m in against)
+                + " percentage points (95%)"
+            )
     console.print(f"results: {out / 'results.csv'}, {out / 'results.json'}; plot: {plot}")
