@@ -29,11 +29,18 @@ from gaitlib.gaits import (
     register_gait,
     registry,
     save_motion_file,
+    trunk_sway,
 )
 from gaitlib.robots.a1 import constants as c
 
 FR, FL, RR, RL = range(4)
 SHIPPED = ("bound", "pace", "pronk", "stand", "trot", "walk")
+
+
+def _gait(name: str) -> GaitDescription:
+    """A registered gait, or ``NAME+sway``: that gait with its trunk swaying."""
+    base, _, sway = name.partition("+")
+    return dataclasses.replace(get_gait(base), trunk_sway=sway == "sway")
 
 
 def _phases(start: float, stop: float, count: int) -> torch.Tensor:
@@ -114,11 +121,11 @@ def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
     path = tmp_path / "amble.toml"
     path.write_text(
         "duty_factor = 0.7\nstride_frequency = 1.5\nforward_speed = 0.3\nswing_height = 0.05\n"
-        "body_height = 0.25\nfoot_lateral_offset = 0.02\n"
+        "body_height = 0.25\nfoot_lateral_offset = 0.02\ntrunk_sway = true\n"
         "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.25\nRL = 0.75\n"
     )
     desc = load_gait_file(path)
-    assert desc.name == "amble"  # from the file name
+    assert desc.name == "amble" and desc.trunk_sway  # the name from the file name
     register_gait(desc)
     assert "amble" in gait_names() and get_gait("amble") is desc
     clip = clip_from_description(get_gait("amble"))
@@ -126,8 +133,9 @@ def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
     frame = clip.frame(torch.tensor([0.0, 0.8]))
     # Leg phases (phase - offset) mod 1 against duty 0.7: at phase 0 only RR (0.75) swings, at 0.8 only FR (0.8).
     assert frame.contact.tolist() == [[True, True, False, True], [False, True, True, True]]
-    # Feet sit 2 cm outward of their thigh joints.
-    np.testing.assert_allclose(frame.foot_pos_local[0, :, 1].numpy(), [-0.15205, 0.15205, -0.15205, 0.15205], atol=1e-5)
+    # Feet sit 2 cm outward of their thigh joints, on the straight path: against the sway in the trunk frame.
+    lateral = np.array([-0.15205, 0.15205, -0.15205, 0.15205]) - frame.root_pos[0, 1].item()
+    np.testing.assert_allclose(frame.foot_pos_local[0, :, 1].numpy(), lateral, atol=1e-5)
 
 
 @pytest.mark.parametrize(
@@ -154,6 +162,11 @@ def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
             "[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 1.5\nRL = 0.0\n",
             "phase offset of RR",
         ),
+        (
+            "duty_factor = 0.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n"
+            "trunk_sway = 1\n[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.5\nRL = 0.0\n",
+            "trunk_sway must be true or false",
+        ),
     ],
 )
 def test_malformed_gait_file_gives_a_one_line_error(tmp_path, text: str, problem: str) -> None:
@@ -176,9 +189,9 @@ def test_impossible_gaits_are_rejected() -> None:
 # --- reference clips from descriptions --------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", SHIPPED)
+@pytest.mark.parametrize("name", [*SHIPPED, "pace+sway"])
 def test_clip_is_periodic_and_inside_joint_limits(name: str) -> None:
-    desc = get_gait(name)
+    desc = _gait(name)
     clip = clip_from_description(desc)
     assert clip.period == pytest.approx(desc.period)
     assert clip.phase_rate == pytest.approx(desc.stride_frequency)
@@ -201,9 +214,9 @@ def test_clip_is_periodic_and_inside_joint_limits(name: str) -> None:
     assert (derivative - frames.joint_vel[1:-1]).abs().max() < 0.05 * max(1.0, frames.joint_vel.abs().max().item())
 
 
-@pytest.mark.parametrize("name", ["trot", "pace", "bound", "walk"])
+@pytest.mark.parametrize("name", ["trot", "pace", "bound", "walk", "pace+sway"])
 def test_clip_feet_follow_the_described_trajectories(name: str) -> None:
-    desc = get_gait(name)
+    desc = _gait(name)
     clip = clip_from_description(desc)
     phase = _phases(0.0, 1.0, 997)[:-1]
     frames = clip.frame(phase)
@@ -231,6 +244,27 @@ def test_clip_feet_follow_the_described_trajectories(name: str) -> None:
         assert swing_world[100, 2] - c.FOOT_RADIUS == pytest.approx(desc.swing_height, abs=1e-3)
         assert swing_world[-1, 0] - swing_world[0, 0] == pytest.approx(desc.stride_length, abs=1e-3)
         assert not swing.contact[3:-3, leg].any()
+
+
+def test_trunk_sway_is_the_periodic_inverted_pendulum_over_the_stance_feet() -> None:
+    # A pace of duty 0.5: the support line alternates between y = -b and +b, b = hip y + thigh offset. The periodic
+    # solution of y'' = w^2 (y - p) is y + b = C cosh(w (t - T/4)) over the right side's half cycle, y(0) = 0:
+    # the trunk reaches b (1 - 1 / cosh(w T / 4)) toward the feet at mid-stance (Kajita et al. 2001).
+    pace = dataclasses.replace(get_gait("pace"), trunk_sway=True, duty_factor=0.5)
+    b, omega = 0.047 + 0.08505, math.sqrt(9.81 / pace.body_height)
+    reach = b * (1 - 1 / math.cosh(omega * pace.period / 4))
+    phase = np.linspace(0.0, 1.0, 2001)
+    sway = trunk_sway(pace, phase)
+    assert sway.min() == pytest.approx(-reach, abs=1e-5) and sway.max() == pytest.approx(reach, abs=1e-5)
+    assert phase[sway.argmin()] == pytest.approx(0.25, abs=0.002)  # toward the right feet (FR, RR) mid-stance
+    assert abs(trunk_sway(pace, np.array([0.0, 0.5]))).max() < 1e-4  # over the centre at each side change
+    clip = clip_from_description(pace)
+    frames = clip.frame(torch.from_numpy(phase[:-1]))
+    np.testing.assert_allclose(frames.root_pos[:, 1].numpy(), sway[:-1], atol=1e-5)
+    # Straight without the option, and straight with it where the support line passes under the trunk.
+    assert not trunk_sway(get_gait("pace"), phase).any()
+    for name in ("trot", "bound", "pronk", "stand"):
+        assert abs(trunk_sway(_gait(f"{name}+sway"), phase)).max() < 1e-9, name
 
 
 def test_trot_foot_positions_hand_computed() -> None:

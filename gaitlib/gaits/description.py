@@ -10,6 +10,7 @@ A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :clas
     swing_height = 0.06       # m
     body_height = 0.26        # m
     foot_lateral_offset = 0.0 # m, optional
+    trunk_sway = false        # optional: the trunk sways sideways over its stance feet
 
     [phase_offsets]           # touchdown phase of each leg, cycles
     FR = 0.0
@@ -36,7 +37,8 @@ class GaitDescription:
     """A periodic gait of the A1, from which :func:`gaitlib.gaits.clip_from_description` builds a reference clip.
 
     Each foot is in stance for ``duty_factor`` of the cycle starting at its phase offset, then swings. The trunk
-    moves forward at constant speed and height with level orientation.
+    moves forward at constant speed and height with level orientation, straight or (``trunk_sway``) swaying
+    sideways over its stance feet.
     """
 
     name: str
@@ -58,6 +60,10 @@ class GaitDescription:
     foot_lateral_offset: float = 0.0
     """Sideways shift of each foot from below its thigh joint, m, positive away from the body midline (widens the
     stance)."""
+    trunk_sway: bool = False
+    """Sway the trunk sideways as a linear inverted pendulum balanced over the stance feet
+    (:func:`gaitlib.gaits.trunk_sway`), as a pacing animal does; false: the trunk runs straight. A gait whose
+    stance feet are centred under the trunk at every phase (trot, pronk, bound, stand) does not sway either way."""
 
     def __post_init__(self) -> None:
         def fail(problem: str) -> GaitError:
@@ -86,6 +92,8 @@ class GaitDescription:
             if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0.0 <= offset < 1.0:
                 raise fail(f"phase offset of {leg} must be a number in [0, 1) cycles, got {offset!r}")
         object.__setattr__(self, "phase_offsets", tuple(float(o) for o in offsets))
+        if not isinstance(self.trunk_sway, bool):
+            raise fail(f"trunk_sway must be true or false, got {self.trunk_sway!r}")
         if not 0.0 < self.duty_factor <= 1.0:
             raise fail(f"duty_factor must be in (0, 1], got {self.duty_factor}")
         if self.stride_frequency <= 0.0:
@@ -109,7 +117,7 @@ class GaitDescription:
 
 
 _SCALAR_KEYS = ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height")
-_OPTIONAL_KEYS = ("name", "foot_lateral_offset")
+_OPTIONAL_KEYS = ("name", "foot_lateral_offset", "trunk_sway")
 
 
 def load_gait_file(path: str | Path) -> GaitDescription:
@@ -138,6 +146,7 @@ def load_gait_file(path: str | Path) -> GaitDescription:
             name=table.get("name", path.stem),
             phase_offsets=tuple(offsets[leg] for leg in LEG_NAMES),
             foot_lateral_offset=table.get("foot_lateral_offset", 0.0),
+            trunk_sway=table.get("trunk_sway", False),
             **{key: table[key] for key in _SCALAR_KEYS},
         )
     except GaitError as error:

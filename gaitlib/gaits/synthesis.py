@@ -23,9 +23,12 @@ from gaitlib.gaits.description import GaitDescription
 from gaitlib.gaits.kinematics import forward_kinematics, inverse_kinematics
 from gaitlib.robots.a1.constants import FOOT_RADIUS, HIP_OFFSETS, JOINT_LOWER, JOINT_UPPER, THIGH_OFFSET_Y
 
-__all__ = ["clip_from_description", "contact_schedule", "foot_trajectory"]
+__all__ = ["clip_from_description", "contact_schedule", "foot_trajectory", "trunk_sway"]
 
 _REACH_TOLERANCE = 1e-6  # m: IK solutions whose feet miss their targets by more than this are out of reach
+_GRAVITY = 9.81  # m/s^2: MuJoCo's default gravity, which the A1 model keeps
+_SWAY_SAMPLES = 512  # points per cycle at which the sway's periodic boundary problem is solved
+_CELL_SAMPLES = 8  # contact samples averaged over each of those points' cells
 
 
 def _leg_phase(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
@@ -44,6 +47,51 @@ def contact_schedule(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
         (..., 4) bool, leg order FR, FL, RR, RL: the foot is in stance.
     """
     return _leg_phase(desc, phase) < desc.duty_factor
+
+
+def _neutral_feet(desc: GaitDescription) -> np.ndarray:
+    """(4, 3) neutral foot points in the trunk frame at z = 0, m (see the module docstring)."""
+    thigh_y = np.asarray(THIGH_OFFSET_Y)
+    offset = np.stack([np.zeros(4), thigh_y + np.sign(thigh_y) * desc.foot_lateral_offset, np.zeros(4)], axis=-1)
+    return np.asarray(HIP_OFFSETS) + offset
+
+
+def trunk_sway(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """Sideways trunk offset from the straight path, zero unless ``desc.trunk_sway``.
+
+    The trunk is a linear inverted pendulum of height ``body_height`` (Kajita et al. 2001, "The 3D linear inverted
+    pendulum mode", IROS) whose zero-moment point is the lateral centre ``p`` of the stance feet's neutral points:
+    ``y'' = (g / body_height) (y - p)`` while a foot is down, ``y'' = 0`` in flight. Its periodic solution over one
+    cycle (second differences on a 512-point grid, one linear solve) is the sway: the trunk swings toward the feet
+    that bear it, is pushed back toward the other side and is caught by its feet. A pace, whose support line lies
+    0.13 m to one side for most of each half cycle, sways a few centimetres each way; a trot, whose diagonal
+    support line passes under the trunk, does not sway.
+
+    Args:
+        desc: the gait.
+        phase: (...) gait phase, cycles.
+
+    Returns:
+        (...) offset along the trunk's y axis (to the left), m.
+    """
+    phase = np.asarray(phase, dtype=np.float64)
+    if not desc.trunk_sway:
+        return np.zeros_like(phase)
+    grid = np.arange(_SWAY_SAMPLES) / _SWAY_SAMPLES
+    # Each grid point averages the pendulum over its own cell, so a touchdown between points is not moved onto one.
+    cell = grid[:, None] + (np.arange(_CELL_SAMPLES) + 0.5) / (_CELL_SAMPLES * _SWAY_SAMPLES) - 0.5 / _SWAY_SAMPLES
+    stance = contact_schedule(desc, cell)  # (N, 8, 4)
+    centre = (stance * _neutral_feet(desc)[:, 1]).sum(-1) / np.maximum(stance.sum(-1), 1)
+    omega_sq = np.where(stance.any(-1), _GRAVITY / desc.body_height, 0.0)  # 1/s^2; 0 in flight
+    stiffness, pull = omega_sq.mean(-1), (omega_sq * centre).mean(-1)  # 1/s^2, m/s^2
+    step = desc.period / _SWAY_SAMPLES
+    second_difference = (
+        np.roll(np.eye(_SWAY_SAMPLES), 1, axis=1)
+        + np.roll(np.eye(_SWAY_SAMPLES), -1, axis=1)
+        - 2.0 * np.eye(_SWAY_SAMPLES)
+    ) / step**2
+    sway = np.linalg.solve(second_difference - np.diag(stiffness), -pull)
+    return np.interp(np.mod(phase, 1.0), np.append(grid, 1.0), np.append(sway, sway[0]))
 
 
 def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
@@ -69,12 +117,9 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     swing_x = -0.5 * stance_travel + stride * (s - np.sin(angle) / (2.0 * np.pi)) - swing_fraction * stride * s
     lift = desc.swing_height * 0.5 * (1.0 - np.cos(angle))
 
-    thigh_y = np.asarray(THIGH_OFFSET_Y)
-    neutral = np.asarray(HIP_OFFSETS) + np.stack(
-        [np.zeros(4), thigh_y + np.sign(thigh_y) * desc.foot_lateral_offset, np.zeros(4)], axis=-1
-    )
+    neutral = _neutral_feet(desc)
     x = neutral[:, 0] + np.where(in_stance, stance_x, swing_x)
-    y = np.broadcast_to(neutral[:, 1], x.shape)
+    y = neutral[:, 1] - trunk_sway(desc, phase)[..., None] + np.zeros_like(x)
     z = FOOT_RADIUS - desc.body_height + np.where(in_stance, 0.0, lift)
     return np.stack([x, y, z], axis=-1)
 
@@ -102,6 +147,7 @@ def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -
         raise GaitError(f"gait '{desc.name}': the foot trajectories need joint angles beyond the A1's limits")
     root_pos = np.zeros((intervals + 1, 3))
     root_pos[:, 0] = desc.stride_length * phase
+    root_pos[:, 1] = trunk_sway(desc, phase)
     root_pos[:, 2] = desc.body_height
     root_quat = np.zeros((intervals + 1, 4))
     root_quat[:, 0] = 1.0
