@@ -13,8 +13,8 @@ import pytest
 import torch
 
 from gaitlib.errors import GaitError, UnknownNameError
-from gaitlib.gaits import GaitDescription
 from gaitlib.gaits import (
+    GaitDescription,
     clip_from_description,
     contact_schedule,
     foot_trajectory,

@@ -6,7 +6,6 @@ import json
 
 import numpy as np
 import pytest
-
 from cli_runner import gaitlib_quick
 from test_transitions import make_file, synthetic
 

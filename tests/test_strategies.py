@@ -11,6 +11,8 @@ import torch
 from conftest import copy_library
 
 from gaitlib.errors import TransitionDataError, UnknownNameError
+from gaitlib.meta.episode import run_episode
+from gaitlib.meta.setup import load_switching
 from gaitlib.strategies import (
     PHASE_GRID,
     SwitchQuery,
@@ -24,8 +26,6 @@ from gaitlib.strategies import (
     save_table,
     strategy_names,
 )
-from gaitlib.meta.episode import run_episode
-from gaitlib.meta.setup import load_switching
 from gaitlib.strategies.calibration import Calibration, calibrate, platt
 from gaitlib.strategies.lookahead import LookaheadStrategy
 from gaitlib.strategies.net import NetStrategy
