@@ -110,7 +110,7 @@ def run_command(
 
 def benchmark_command(
     strategies: str = typer.Option(
-        "random,value,tmt,tmt-value,net", "--strategies", help="Comma-separated strategies to compare."
+        "random,value,tmt,tmt-value,net,net-lookahead", "--strategies", help="Comma-separated strategies to compare."
     ),
     magnitudes: str = typer.Option(
         "0:500:50",
