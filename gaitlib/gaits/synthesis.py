@@ -15,6 +15,8 @@ Foot positions are contact-sphere centres; a foot on the ground has its centre o
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from gaitlib.errors import GaitError
@@ -77,10 +79,19 @@ def trunk_sway(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     phase = np.asarray(phase, dtype=np.float64)
     if not desc.trunk_sway:
         return np.zeros_like(phase)
+    sway = _sway_cycle(desc)
+    grid = np.arange(_SWAY_SAMPLES + 1) / _SWAY_SAMPLES
+    return np.interp(np.mod(phase, 1.0), grid, np.append(sway, sway[0]))
+
+
+@functools.lru_cache(maxsize=32)
+def _sway_cycle(desc: GaitDescription) -> np.ndarray:
+    """(512,) read-only sway at phases 0, 1/512, ..., m: the periodic pendulum solved once per gait (a clip asks for
+    it for its feet and for its trunk)."""
     grid = np.arange(_SWAY_SAMPLES) / _SWAY_SAMPLES
     # Each grid point averages the pendulum over its own cell, so a touchdown between points is not moved onto one.
     cell = grid[:, None] + (np.arange(_CELL_SAMPLES) + 0.5) / (_CELL_SAMPLES * _SWAY_SAMPLES) - 0.5 / _SWAY_SAMPLES
-    stance = contact_schedule(desc, cell)  # (N, 8, 4)
+    stance = contact_schedule(desc, cell)  # (points, cell samples, legs)
     centre = (stance * _neutral_feet(desc)[:, 1]).sum(-1) / np.maximum(stance.sum(-1), 1)
     omega_sq = np.where(stance.any(-1), _GRAVITY / desc.body_height, 0.0)  # 1/s^2; 0 in flight
     stiffness, pull = omega_sq.mean(-1), (omega_sq * centre).mean(-1)  # 1/s^2, m/s^2
@@ -91,7 +102,8 @@ def trunk_sway(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
         - 2.0 * np.eye(_SWAY_SAMPLES)
     ) / step**2
     sway = np.linalg.solve(second_difference - np.diag(stiffness), -pull)
-    return np.interp(np.mod(phase, 1.0), np.append(grid, 1.0), np.append(sway, sway[0]))
+    sway.setflags(write=False)
+    return sway
 
 
 def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
@@ -119,7 +131,7 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
 
     neutral = _neutral_feet(desc)
     x = neutral[:, 0] + np.where(in_stance, stance_x, swing_x)
-    y = neutral[:, 1] - trunk_sway(desc, phase)[..., None] + np.zeros_like(x)
+    y = neutral[:, 1] - trunk_sway(desc, phase)[..., None]
     z = FOOT_RADIUS - desc.body_height + np.where(in_stance, 0.0, lift)
     return np.stack([x, y, z], axis=-1)
 
