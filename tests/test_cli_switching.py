@@ -77,8 +77,9 @@ def test_unknown_gait_or_strategy_is_one_error_line(switching_library) -> None:
 def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library, tmp_path) -> None:
     out = tmp_path / "bench"
     args = [
-        "benchmark", "--strategies", "random,tmt-value,net-lookahead", "--magnitudes", "0:100:100", "--samples", "2", "--pairs",
-        "stand-trot", "--worlds", "4", "--out", str(out), "--library", str(switching_library), "--backend", "mujoco",
+        "benchmark", "--strategies", "random,tmt-value,net-lookahead", "--magnitudes", "0:100:100", "--samples", "2",
+        "--pairs", "stand-trot", "--worlds", "4", "--out", str(out), "--library", str(switching_library),
+        "--backend", "mujoco",
     ]
     result = gaitlib(*args, "--json")
     assert result.returncode == 0, result.stderr
