@@ -7,7 +7,7 @@ import sys
 
 import typer
 
-from gaitlib.cli import switching, throughput, train, transitions
+from gaitlib.cli import library, switching, throughput, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -21,6 +21,7 @@ app = typer.Typer(
 )
 app.command("train")(train.train_command)
 app.command("eval")(train.eval_command)
+app.command("library")(library.library_command)
 app.command("collect")(transitions.collect_command)
 app.command("fit")(transitions.fit_command)
 app.command("map")(transitions.map_command)

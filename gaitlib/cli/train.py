@@ -32,7 +32,9 @@ def train_command(
         ..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."
     ),
     preset: str = typer.Option(
-        "cpu", "--preset", help="cpu (tuned for a 2-core CPU), paper (Table 2) or tiny (the tests': learns nothing)."
+        "cpu", "--preset",
+        help="cpu (tuned for a 2-core CPU) or paper (Table 2). (tiny is for tests only: it learns nothing, and is "
+        "refused in a library of trained gaits.)",
     ),
     iterations: int | None = bounded(
         None, "--iterations", help="PPO iterations (default: the preset's);", bounds=COUNT
@@ -46,7 +48,14 @@ def train_command(
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     gait_file: Path | None = typer.Option(None, "--gait-file", help="TOML gait description of a new gait."),
-    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    library: Path | None = typer.Option(
+        None, "--library",
+        help="Library to write the gait into (default: $GAITLIB_LIBRARY, else your own runs/library, made from the "
+        "shipped library on its first write).",
+    ),
+    replace: bool = typer.Option(
+        False, "--replace", help="Replace the gait's entry in the shipped library (refused without it)."
+    ),
     run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
     checkpoint_every: int = bounded(50, "--checkpoint-every", help="Iterations between checkpoints;", bounds=COUNT),
@@ -54,24 +63,30 @@ def train_command(
         64, "--eval-episodes", help="Episodes of the final evaluation (one world each);", bounds=WORLDS
     ),
 ) -> None:
-    """Train one gait policy with PPO and write it to the library (other gaits are never touched)."""
+    """Train one gait policy with PPO and write it into a library (other gaits are never touched; the shipped
+    library only with --replace)."""
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
     from gaitlib.cli.progress import job_progress
-    from gaitlib.training import default_library_dir, get_preset
+    from gaitlib.training import get_preset
     from gaitlib.training.distributed import Ranks
+    from gaitlib.training.target import check_target, training_target
     from gaitlib.training.trainer import TrainRequest, train_gait
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
     chosen = get_preset(preset)
+    target, copy_from = training_target(library)
+    plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from)
     request = TrainRequest(
         description=description,
         preset=chosen,
         iterations=iterations if iterations is not None else chosen.iterations,
         time_limit_s=None if minutes is None else 60.0 * minutes,
-        library=library or default_library_dir(),
+        library=target,
+        copy_from=copy_from,
+        replace=replace,
         run_dir=run_dir or Path("runs") / gait,
         backend=backend,
         seed=seed,
@@ -83,6 +98,8 @@ def train_command(
         train_gait(request)
         return
     console = Console(stderr=True)
+    for note in plan.notes:
+        console.print(f"gaitlib: {note}", soft_wrap=True)
     with job_progress(console, f"train {gait}") as progress:
         task = progress.add_task("train", total=request.iterations, status="starting")
 
@@ -107,6 +124,20 @@ def train_command(
         f"joint RMSE {e.joint_rmse:.3f} rad, speed {e.forward_speed:.2f} m/s (reference {e.reference_speed:.2f})",
         soft_wrap=True,
     )
+    if copy_from is not None:
+        console.print(f"{target} is your own library, made now as a copy of the shipped {copy_from}", soft_wrap=True)
+    _say_status(console, target, gait)
+
+
+def _say_status(console, library: Path, gait: str) -> None:
+    """What the library a gait was just written into needs before it switches, and how to use it."""
+    from gaitlib.library import library_status
+    from gaitlib.training import Library
+
+    status = library_status(Library(library))
+    for problem in status.problems:
+        console.print(f"next: {problem.line()}", soft_wrap=True)
+    console.print(f"use it: gaitlib eval {gait} --library {library} (or export GAITLIB_LIBRARY={library})")
 
 
 def eval_command(

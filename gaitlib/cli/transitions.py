@@ -86,14 +86,20 @@ def collect_command(
     out.parent.mkdir(parents=True, exist_ok=True)
     console = Console(stderr=True)
     with job_progress(console, "collect") as progress:
-        task = progress.add_task("collect", total=config.samples, status="starting")
+        task = progress.add_task("collect", total=config.samples, status="building the worlds")
+        last_line = [-math.inf]
 
         def show(p) -> None:
             rates = " ".join(f"{m}-{n} {r:.2f}" for (m, n), r in sorted(p.success_rates.items()))
-            status = escape(f"{p.samples_per_s:6.1f} samples/s  success [{rates}]")
-            progress.update(task, completed=p.samples, status=status)
-            if not console.is_terminal:
-                console.print(f"{p.samples}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)
+            done = p.samples + p.under_way
+            left = (p.target - done) / p.samples_per_s if p.samples_per_s > 0 else math.inf
+            status = escape(
+                f"{p.samples_per_s:6.1f} samples/s  {p.samples} in the file  ~{_duration(left)} left  success [{rates}]"
+            )
+            progress.update(task, completed=done, status=status)
+            if not console.is_terminal and (p.under_way == 0 or p.elapsed_s - last_line[0] >= 30.0):
+                last_line[0] = p.elapsed_s
+                console.print(f"{done}/{p.target} {p.elapsed_s:7.0f}s  {status}", soft_wrap=True)
 
         result = collect(out, library=lib, gaits=names, config=config, progress=show, cluster=cluster)
     if result.note:
@@ -103,6 +109,16 @@ def collect_command(
         + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items())),
         soft_wrap=True,
     )
+
+
+def _duration(seconds: float) -> str:
+    """``seconds`` as ``1h02m``, ``3m05s`` or ``42s`` (``?`` before there is a rate)."""
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = max(0, round(seconds))
+    if seconds >= 3600:
+        return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
+    return f"{seconds // 60}m{seconds % 60:02d}s" if seconds >= 60 else f"{seconds}s"
 
 
 def fit_command(
@@ -125,13 +141,18 @@ def fit_command(
     from gaitlib.transitions import read_all
 
     lib = Library(library)
-    samples = read_all(data)
+    samples = read_all(data, current=lib.identities())
     if evaluate:
         _report(evaluate_library(lib, samples, sources=data), as_json)
         return
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
     report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed)
     _report(report.as_dict(), as_json)
+    if not as_json:
+        if report.note:
+            print(f"data: {report.note}")
+        uncovered = ", ".join(report.uncovered) or "none"
+        print(f"wrote {lib.switching_dir}; pairs of the library it does not cover: {uncovered}")
 
 
 def _report(report: dict, as_json: bool) -> None:

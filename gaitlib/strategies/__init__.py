@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from gaitlib.errors import TransitionDataError
+from gaitlib.library import library_status
 from gaitlib.registry import Registry
 from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
 from gaitlib.strategies.calibration import Calibration, load_calibration
@@ -57,7 +58,7 @@ class SwitchResources:
     def table(self) -> TransitionTable:
         """The library's TMT (with typical values and calibrated thresholds)."""
         if "table" not in self._cache:
-            self.library.check_switching()
+            self._check_coverage()
             table = load_table(self.library.tmt_path, identities=self.library.identities(self.gaits))
             self._check_gaits("TMT", table.gaits)
             self._cache["table"] = table
@@ -67,7 +68,7 @@ class SwitchResources:
     def calibration(self) -> Calibration:
         """The calibration of the library's transition-net (checked against the library's policies)."""
         if "calibration" not in self._cache:
-            self.library.check_switching()
+            self._check_coverage()
             identities = self.library.identities(self.gaits)
             calibration = load_calibration(self.library.calibration_path, identities=identities)
             self._check_gaits("net calibration", calibration.gaits)
@@ -80,16 +81,32 @@ class SwitchResources:
         if "net" not in self._cache:
             from gaitlib.transition_net import load_net
 
-            self.library.check_switching()
+            self._check_coverage()
             saved = load_net(self.library.net_path, identities=self.library.identities(self.gaits))
             self._check_gaits("transition-net", saved.net.spec.gaits)
             self._cache["net"] = saved.net
         return self._cache["net"]
 
+    def _check_coverage(self) -> None:
+        """Refuse, in one line with the commands that fix it, switching models that do not drive every pair of
+        :attr:`gaits` with the library's current policies (:mod:`gaitlib.library.status`; damaged or missing
+        files are left to their own loaders' messages)."""
+        if "covered" in self._cache:
+            return
+        self.library.check_switching()
+        status = library_status(self.library)
+        if status.bundle is not None:
+            missing = status.uncovered(self.gaits)
+            refit = next((p for p in status.problems if p.about == "switching"), None)
+            if (missing or set(status.bundle.gaits) != set(self.gaits)) and refit is not None:
+                raise TransitionDataError(f"library {self.library.root}: {refit.line()}")
+        self._cache["covered"] = True
+
     def _check_gaits(self, what: str, gaits: tuple[str, ...]) -> None:
         if tuple(gaits) != tuple(self.gaits):
             raise TransitionDataError(
-                f"the {what} was fitted for gaits {list(gaits)}, not {list(self.gaits)}; collect and fit again"
+                f"the {what} was fitted for gaits {list(gaits)}, not {list(self.gaits)}; fit it on data of exactly "
+                f"these gaits (gaitlib library --library {self.library.root} lists the commands)"
             )
 
 

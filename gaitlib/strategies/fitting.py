@@ -19,7 +19,7 @@ from gaitlib.atomic import write_json
 from gaitlib.errors import UnknownNameError
 from gaitlib.strategies.calibration import calibrate, save_calibration
 from gaitlib.strategies.tmt import build_table, save_table
-from gaitlib.training.library import Library
+from gaitlib.training.library import Library, ordered_pairs
 from gaitlib.transition_net import INPUT_KINDS, EpochStats, FitConfig, FitResult, evaluate_net, fit, load_net, save_net
 from gaitlib.transitions import TransitionData
 
@@ -57,6 +57,11 @@ class FitReport:
     """Input kind -> its fit (the first is the one written to the library)."""
     written: tuple[str, ...]
     """Files written, relative to the library."""
+    uncovered: tuple[str, ...] = ()
+    """Ordered pairs (``"m-n"``) of the library's gaits that the fitted models do not cover (no samples)."""
+    note: str | None = None
+    """What reading the data left out or tolerated (samples of policies the library no longer holds), else
+    ``None``."""
 
     def accuracy(self) -> dict[str, dict[str, float]]:
         """Input kind -> ``"m-n"`` -> balanced validation accuracy (0-1)."""
@@ -79,6 +84,8 @@ class FitReport:
             "balanced_validation_accuracy": self.accuracy(),
             "paper_table_3": {kind: dict(zip(PAPER_PAIRS, row, strict=True)) for kind, row in PAPER_TABLE_3.items()},
             "written": list(self.written),
+            "uncovered_pairs": list(self.uncovered),
+            "data_note": self.note,
         }
 
 
@@ -108,6 +115,8 @@ def fit_library(
     for kind in dict.fromkeys(inputs):
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
+    written = next(iter(results.values()))
+    covered = {f"{m}-{n}" for m, n in written.validation_accuracy}
     fitted = FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
@@ -116,8 +125,9 @@ def fit_library(
             f"{Library.SWITCHING}/{name}"
             for name in (Library.NET, Library.TMT, Library.ACCURACY, Library.CALIBRATION)
         ),
+        uncovered=tuple(pair for pair in ordered_pairs(library.gaits()) if pair not in covered),
+        note=data.info.note,
     )
-    written = next(iter(results.values()))
     calibration = calibrate(written.net, data, train_rows=written.split.train, identities=identities)
     with library.publish_switching() as staging:  # the four replace the library's together, or none does
         save_net(staging / Library.NET, written)

@@ -54,7 +54,11 @@ __all__ = [
     "PolicySettings",
     "check_identities",
     "default_library_dir",
+    "first_fit",
     "gait_order",
+    "is_shipped",
+    "ordered_pairs",
+    "shipped_library_dir",
 ]
 
 FORMAT_VERSION = 2
@@ -66,16 +70,45 @@ class LibraryError(GaitlibError):
     """A library entry is missing, damaged, or was written for another version or observation layout."""
 
 
+def shipped_library_dir() -> Path:
+    """The library that ships with gaitlib: ``library/`` of the repository, beside the package."""
+    return Path(__file__).resolve().parents[2] / "library"
+
+
 def default_library_dir() -> Path:
-    """``$GAITLIB_LIBRARY`` if set, else the repository's shipped ``library/`` beside the package."""
+    """The library commands read by default: ``$GAITLIB_LIBRARY`` if set, else the shipped one
+    (:func:`shipped_library_dir`). Training writes elsewhere by default (:mod:`gaitlib.training.target`)."""
     if "GAITLIB_LIBRARY" in os.environ:
         return Path(os.environ["GAITLIB_LIBRARY"])
-    return Path(__file__).resolve().parents[2] / "library"
+    return shipped_library_dir()
+
+
+def is_shipped(root: Path | str) -> bool:
+    """Whether ``root`` is the shipped library (:func:`shipped_library_dir`), under whatever path it is named."""
+    try:
+        return Path(root).resolve() == shipped_library_dir().resolve()
+    except OSError:
+        return False
 
 
 def gait_order(names: Iterable[str]) -> tuple[str, ...]:
     """The canonical order of a set of gaits (names sorted, each once): the one order every file indexes gaits by."""
     return tuple(sorted(set(names)))
+
+
+def ordered_pairs(gaits: Iterable[str]) -> list[str]:
+    """Every ordered pair ``"m-n"`` of ``gaits`` (sources, then destinations, in the order given)."""
+    names = list(gaits)
+    return [f"{m}-{n}" for m in names for n in names if m != n]
+
+
+def first_fit(root: Path) -> tuple[str, str]:
+    """The commands that make a library's first switching models: collect every pair, then fit."""
+    data = Path("data") / f"{Path(root).name}.h5"
+    return (
+        f"gaitlib collect --library {root} --samples 2e5 --out {data}",
+        f"gaitlib fit --library {root} --data {data}",
+    )
 
 
 def check_identities(recorded: Mapping[str, str], current: Mapping[str, str], *, what: str) -> None:
@@ -88,8 +121,8 @@ def check_identities(recorded: Mapping[str, str], current: Mapping[str, str], *,
             raise TransitionDataError(f"{what} needs gait '{gait}', which the library does not hold")
         if current[gait] != identity:
             raise TransitionDataError(
-                f"{what} was made for another '{gait}' policy than the library's (identities differ); "
-                "collect and fit again"
+                f"{what} was made for another '{gait}' policy than the library's (identities differ); gaitlib "
+                "library lists the stale pairs and the commands that collect and fit them again"
             )
 
 
@@ -150,7 +183,9 @@ class Library:
                 f"library {self.root} keeps its transition-net and TMT in the old layout (transition_net/, tmt/); "
                 "run gaitlib fit again to write switching/"
             )
-        raise TransitionDataError(f"library {self.root} has no transition-net and TMT yet (run gaitlib fit)")
+        raise TransitionDataError(
+            f"library {self.root} has no transition-net and TMT yet; make them: {' && '.join(first_fit(self.root))}"
+        )
 
     def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
         """A staging folder to write the net, TMT, accuracy report and calibration into (names :attr:`NET`,
@@ -210,29 +245,33 @@ class Library:
         """The latent size, action settings, observation options and action delay that the entries of ``names``
         share: policies that drive one environment and fill one transition file must agree on them."""
         entries = self.entries(names)
-        latent = {e.name: e.policy.latent_dim for e in entries}
-        if len(set(latent.values())) != 1:
-            raise LibraryError(f"library policies have different latent sizes {latent}; retrain them alike")
-        actions = {e.name: (e.action["type"], e.action_scale, e.action_clip) for e in entries}
-        if len(set(actions.values())) != 1:
-            raise LibraryError(f"library policies use different action settings {actions}; retrain them alike")
-        observations = {e.name: e.observation for e in entries}
-        if len(set(observations.values())) != 1:
-            heading = {name: cfg.heading for name, cfg in observations.items()}
-            raise LibraryError(
-                f"library policies read different observations (heading error shown: {heading}); retrain them alike"
-            )
-        delays = {e.name: e.action_delay_steps for e in entries}
-        if len(set(delays.values())) != 1:
-            raise LibraryError(
-                f"library policies were trained with different action delays {delays}; retrain them alike"
-            )
-        kind, scale, clip = next(iter(actions.values()))
+        checks = {
+            "latent sizes": {e.name: e.policy.latent_dim for e in entries},
+            "action settings": {e.name: (e.action["type"], e.action_scale, e.action_clip) for e in entries},
+            "observations": {e.name: e.observation for e in entries},
+            "action delays": {e.name: e.action_delay_steps for e in entries},
+        }
+        for what, values in checks.items():
+            if len(set(values.values())) != 1:
+                raise LibraryError(f"library policies have different {what} {values}; {self._retrain_alike(values)}")
+        first = entries[0]
         return PolicySettings(
-            latent_dim=next(iter(latent.values())),
-            action={"type": kind, "scale": scale, "clip": clip},
-            observation=next(iter(observations.values())),
-            action_delay_steps=next(iter(delays.values())),
+            latent_dim=first.policy.latent_dim,
+            action={"type": first.action["type"], "scale": first.action_scale, "clip": first.action_clip},
+            observation=first.observation,
+            action_delay_steps=first.action_delay_steps,
+        )
+
+    def _retrain_alike(self, values: Mapping[str, object]) -> str:
+        """The commands that retrain the gaits whose value differs from the most common one, with the preset of a
+        gait that has it."""
+        counts = {value: list(values.values()).count(value) for value in values.values()}
+        common = max(counts, key=lambda value: counts[value])
+        model = next(name for name, value in values.items() if value == common)
+        preset = self.entry(model).metadata.get("training", {}).get("preset", {}).get("name", "cpu")
+        odd = [name for name, value in values.items() if value != common]
+        return "retrain them like " + model + ": " + " && ".join(
+            f"gaitlib train {name} --preset {preset} --library {self.root}" for name in odd
         )
 
     def save_entry(

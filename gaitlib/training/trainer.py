@@ -32,6 +32,7 @@ from gaitlib.training.iteration_log import IterationLog, IterationStats, write_s
 from gaitlib.training.library import Library
 from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
+from gaitlib.training.target import check_target, copy_library
 
 __all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "train_gait"]
 
@@ -52,7 +53,12 @@ class TrainRequest:
     time_limit_s: float | None = None
     """Stop after the iteration during which this much training time (s, resumed runs included) has passed."""
     library: Path
-    """Where the trained entry is written (``library/<gait>/``)."""
+    """Where the trained entry is written (``library/<gait>/``; :mod:`gaitlib.training.target`)."""
+    copy_from: Path | None = None
+    """A library copied into :attr:`library` before the entry is written, when :attr:`library` does not exist yet
+    (the shipped library, for the user's own library's first write)."""
+    replace: bool = False
+    """Replace the entry of this gait in the shipped library (refused otherwise, before any work)."""
     run_dir: Path
     """Checkpoints and TensorBoard logs (``checkpoints/latest.pt``, ``events.*``)."""
     backend: str = "auto"
@@ -226,6 +232,10 @@ def train_gait(
     """
     if request.iterations < 1:
         raise GaitlibError(f"--iterations must be positive, got {request.iterations}")
+    check_target(
+        request.library, request.description.name, preset=request.preset.name, replace=request.replace,
+        copy_from=request.copy_from,
+    )
     ranks = Ranks.from_env()
     seed = request.seed + ranks.rank
     torch.manual_seed(seed)
@@ -264,6 +274,8 @@ def _finish(
         backend=backend_name,
         seed=request.seed + 1,
     )
+    if request.copy_from is not None and not request.library.exists():
+        copy_library(request.copy_from, request.library)
     entry = Library(request.library).save_entry(
         description=request.description,
         actor=alg.get_policy(),

@@ -122,7 +122,7 @@ class CollectProgress:
     target: int
     """Samples the file will hold when done."""
     samples_per_s: float
-    """Throughput of this run, samples per wall-clock second."""
+    """Throughput of this run, samples per wall-clock second (those finished in the chunk under way included)."""
     elapsed_s: float
     """Wall-clock time of this run, s."""
     pair_counts: dict[tuple[str, str], tuple[int, int]]
@@ -131,6 +131,9 @@ class CollectProgress:
     """Cycles of this run discarded because the source policy fell before the switch."""
     steps_per_sample: float
     """Control steps (summed over worlds) this run took per sample written."""
+    under_way: int = 0
+    """Samples finished in the chunk under way, not yet in the file (chunks collected in this process; a chunk on
+    a Ray worker shows when it is committed)."""
 
     @property
     def success_rates(self) -> dict[tuple[str, str], float]:
@@ -200,8 +203,8 @@ def collect(
         )
         if cluster is not None:
             cluster = cluster.for_backend(header.settings["backend"], cfg.device)
-        spec = WorkerSpec(ChunkWorker, {"library": str(library.root), "header": header, "config": cfg})
-        return _write_until_done(output, target, tasks, spec, counts, names, cfg, cluster, progress)
+        worker = {"library": str(library.root), "header": header, "config": cfg}
+        return _write_until_done(output, target, tasks, worker, counts, names, cfg, cluster, progress)
 
 
 def _header(
@@ -247,24 +250,28 @@ def _plan(count: int, next_chunk: int, cfg: CollectConfig, num_pairs: int) -> li
         count += n
 
 
-def _write_until_done(output, target, tasks, spec, counts, gaits, cfg: CollectConfig, cluster, progress):
-    """Collect the chunks (here or on Ray workers), commit each in chunk order as it comes, report progress; Ctrl-C
-    stops after the chunk being committed (the chunks under way are lost)."""
+def _write_until_done(output, target, tasks, worker: dict, counts, gaits, cfg: CollectConfig, cluster, progress):
+    """Collect the chunks (here or on Ray workers), commit each in chunk order as it comes, report progress (inside
+    a chunk too, where it runs here); Ctrl-C stops after the chunk being committed (the chunks under way are
+    lost)."""
     count, written, falls, steps, start = target.count, 0, 0, 0, time.perf_counter()
 
-    def report() -> CollectProgress:
+    def report(under_way: int = 0) -> CollectProgress:
         elapsed = time.perf_counter() - start
         return CollectProgress(
             samples=count,
             target=cfg.samples,
-            samples_per_s=written / elapsed,
+            samples_per_s=(written + under_way) / elapsed,
             elapsed_s=elapsed,
             pair_counts=_named(counts, gaits),
             source_falls=falls,
             steps_per_sample=steps / max(written, 1),
+            under_way=under_way,
         )
 
-    results = run_ordered(tasks, spec=spec, cluster=cluster)
+    if cluster is None and progress is not None:
+        worker = worker | {"report": lambda under_way: progress(report(under_way))}
+    results = run_ordered(tasks, spec=WorkerSpec(ChunkWorker, worker), cluster=cluster)
     try:
         for _, chunk in results:
             batch = chunk.batch

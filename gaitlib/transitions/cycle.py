@@ -7,6 +7,8 @@ settings, library), whoever runs it: :class:`ChunkWorker` runs chunks in this pr
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,6 +30,8 @@ __all__ = ["ChunkResult", "ChunkTask", "ChunkWorker", "SwitchCycles", "chunk_see
 
 EPISODE_SECONDS = 1e6
 """Episode length given to the environment, s: no time-out ever ends a cycle (worlds are reset after each)."""
+REPORT_EVERY_S = 1.0
+"""Wall-clock time between a chunk's reports of its finished samples, s."""
 
 
 def chunk_seeds(seed: int, chunk: int) -> tuple[int, int]:
@@ -61,9 +65,19 @@ class ChunkResult:
 class ChunkWorker:
     """Loads a library's policies once and owns one simulator; called with a :class:`ChunkTask`, it collects that
     chunk (a fresh environment on the same simulator, every world reset). Build it with keyword arguments only, so
-    that Ray can build it in an actor."""
+    that Ray can build it in an actor.
 
-    def __init__(self, *, library: str | Path, header: schema.TransitionHeader, config: CollectConfig) -> None:
+    ``report``: called with the samples the chunk under way has finished so far, about every
+    :data:`REPORT_EVERY_S` (a worker in this process only: it is how the progress display moves inside a chunk)."""
+
+    def __init__(
+        self,
+        *,
+        library: str | Path,
+        header: schema.TransitionHeader,
+        config: CollectConfig,
+        report: Callable[[int], None] | None = None,
+    ) -> None:
         from gaitlib.sim import make_backend
         from gaitlib.training.library import Library
 
@@ -78,6 +92,7 @@ class ChunkWorker:
         self._env_cfg = shared.env_config(EnvConfig(episode_seconds=EPISODE_SECONDS, pushes=pushes))
         self._sim = make_backend(header.settings["backend"], num_worlds=config.num_worlds, device=config.device)
         self._policies = [e.policy.to(self._sim.device) for e in entries]
+        self._report = report
 
     def __call__(self, task: ChunkTask) -> ChunkResult:
         env_seed, draw_seed = chunk_seeds(self._cfg.seed, task.chunk)
@@ -86,9 +101,13 @@ class ChunkWorker:
             env, self._policies, pairs=self._pairs, quota=np.asarray(task.quota), cfg=self._cfg,
             latent_dim=self._header.latent_dim, seed=draw_seed,
         )
+        last = time.perf_counter()
         with torch.inference_mode():
             while not cycles.done:
                 cycles.step()
+                if self._report is not None and time.perf_counter() - last >= REPORT_EVERY_S:
+                    last = time.perf_counter()
+                    self._report(cycles.finished)
         batch = cycles.take()
         batch.chunk[:] = task.chunk
         return ChunkResult(batch, cycles.source_falls, cycles.world_steps)
@@ -172,6 +191,11 @@ class SwitchCycles:
             self._restart(source_fell.nonzero().squeeze(1), new_pair=False)
         if due.any():
             self._switch(due.nonzero().squeeze(1))
+
+    @property
+    def finished(self) -> int:
+        """Samples kept so far."""
+        return int(self._filled.sum())
 
     @property
     def done(self) -> bool:

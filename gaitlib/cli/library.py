@@ -1,0 +1,69 @@
+"""``gaitlib library``: what a library holds, what is stale, and the commands that fix it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+__all__ = ["library_command"]
+
+
+def library_command(
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """List a library's gaits (description, training, evaluation, identity), the pairs its switching models cover,
+    and what is stale or inconsistent, each with the exact commands that fix it."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
+    from gaitlib.errors import GaitlibError
+    from gaitlib.library import library_status
+    from gaitlib.training import Library
+
+    lib = Library(library)
+    if not lib.root.is_dir():
+        raise GaitlibError(f"no library at {lib.root}")
+    status = library_status(lib)
+    if as_json:
+        print(json.dumps(status.as_dict()))
+        return
+    console = table_console()
+    gaits = Table(title=f"{lib.root}{' (shipped with gaitlib)' if status.shipped else ''}: gaits")
+    for column in ("gait", "speed m/s", "cycle s", "preset", "iterations", "train min", "eval falls", "eval m/s",
+                   "identity"):
+        gaits.add_column(column, justify="left" if column in ("gait", "preset", "identity") else "right")
+    for g in status.gaits:
+        s = g.summary
+        gaits.add_row(
+            g.name, _num(s["speed_m_s"], 2), _num(s["cycle_s"], 3), str(s["preset"] or "-"),
+            str(s["iterations"] or "-"), _num(s["train_minutes"], 1),
+            "-" if s["eval_fall_rate"] is None else f"{100 * s['eval_fall_rate']:.1f}% of {s['eval_episodes']}",
+            _num(s["eval_speed_m_s"], 2), "unusable" if g.identity is None else g.identity[:12],
+        )
+    console.print(gaits)
+    if status.bundle is not None:
+        b = status.bundle
+        data = ", ".join(d["path"] for d in b.data)
+        pairs = Table(title=f"switching models (inputs {', '.join(b.inputs)}; fitted on {escape(data)})")
+        for column in ("pair", "state", "samples", "net accuracy"):
+            pairs.add_column(column, justify="left" if column in ("pair", "state") else "right")
+        for pair, state in status.pairs.items():
+            samples = b.pair_samples.get(pair)
+            accuracy = b.accuracy.get(pair)
+            pairs.add_row(pair, state, "-" if samples is None else f"{samples:,}",
+                          "-" if accuracy is None or state != "covered" else f"{100 * accuracy:.1f}%")
+        console.print(pairs)
+    if not status.problems:
+        console.print("nothing stale: every gait is usable and every pair is covered")
+    for problem in status.problems:
+        console.print(f"problem: {escape(problem.text)}", soft_wrap=True)
+        for command in problem.commands:
+            console.print(f"  fix: {escape(command)}", soft_wrap=True)
+
+
+def _num(value: float | None, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"

@@ -1,0 +1,105 @@
+"""Where ``gaitlib train`` writes, and what it may replace there.
+
+Training never silently replaces a gait that other artefacts depend on (Isaac Lab, mjlab and legged_gym likewise
+never write over what they ship: a run writes its own output, and the user chooses what to use):
+
+- By default a trained gait goes into the user's own library, :data:`USER_LIBRARY` (or ``$GAITLIB_LIBRARY``), made
+  on its first write as a copy of the shipped library (entries and switching models), so that a retrained gait
+  joins gaits it can switch with at once and only its own pairs need new transition data.
+- The shipped library's entries are replaced only on purpose (``--replace``).
+- The tests' preset (``tiny``: it learns nothing) writes only into a library whose every entry it trained.
+- Replacing an entry of any other library is allowed, and said: before training starts, which pairs of its
+  switching models the new policy leaves stale (``gaitlib library`` then prints the commands that fix them).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from gaitlib.errors import GaitlibError
+from gaitlib.training.library import Library, is_shipped, ordered_pairs, shipped_library_dir
+from gaitlib.training.publish import staged_folder
+
+__all__ = ["TEST_PRESET", "USER_LIBRARY", "TrainTarget", "check_target", "copy_library", "training_target"]
+
+USER_LIBRARY = Path("runs") / "library"
+"""The user's own library, relative to the working folder: where ``gaitlib train`` writes by default."""
+TEST_PRESET = "tiny"
+"""The preset that exists for tests: refused in a library holding an entry it did not train."""
+
+
+@dataclass(frozen=True)
+class TrainTarget:
+    """The library a training run writes into, and what it found there before any work."""
+
+    library: Path
+    """The library folder the entry is written into."""
+    copy_from: Path | None
+    """A library to copy into :attr:`library` before the entry is written (it does not exist yet), else ``None``."""
+    notes: tuple[str, ...]
+    """What the run will change beyond its own entry (stale pairs), one line each."""
+
+
+def training_target(library: Path | None) -> tuple[Path, Path | None]:
+    """(the library to write into, the library to copy there first): ``library`` if given (never copied into);
+    else ``$GAITLIB_LIBRARY``; else :data:`USER_LIBRARY`, a copy of the shipped library when it does not exist."""
+    if library is not None:
+        return Path(library), None
+    if "GAITLIB_LIBRARY" in os.environ:
+        return Path(os.environ["GAITLIB_LIBRARY"]), None
+    shipped = shipped_library_dir()
+    fresh = not USER_LIBRARY.exists() and shipped.is_dir()
+    return USER_LIBRARY, shipped if fresh else None
+
+
+def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_from: Path | None = None) -> TrainTarget:
+    """Refuse, before any work, a run that would replace a shipped entry without ``replace`` or put the tests'
+    preset among trained gaits; otherwise say which switching pairs the new entry will leave stale."""
+    lib = Library(copy_from if copy_from is not None else library)
+    names = lib.gaits()
+    if is_shipped(lib.root) and copy_from is None and gait in names and not replace:
+        raise GaitlibError(
+            f"{lib.root / gait} is part of the shipped library, whose switching models depend on it; gaitlib train "
+            f"writes to your own library by default ({USER_LIBRARY}, a copy of the shipped one), or pass --replace "
+            "to replace the shipped entry on purpose"
+        )
+    if preset == TEST_PRESET:
+        trained = [n for n in names if n != gait and _preset(lib, n) != TEST_PRESET]
+        if trained or (gait in names and _preset(lib, gait) != TEST_PRESET):
+            raise GaitlibError(
+                f"the '{TEST_PRESET}' preset is for tests (it learns nothing) and writes only into a library of its "
+                f"own; {library} holds trained gaits ({', '.join(names)}): pass --library with a new folder"
+            )
+    notes = []
+    if gait in names and lib.switching_dir.is_dir():
+        stale = [p for p in ordered_pairs(names) if gait in p.split("-")]
+        notes.append(
+            f"replacing {Path(library) / gait}: the switching models there were fitted on the old {gait}, so pairs "
+            f"{', '.join(stale)} will need new transition data (gaitlib library --library {library} says how)"
+        )
+    return TrainTarget(Path(library), copy_from, tuple(notes))
+
+
+def copy_library(source: Path, destination: Path) -> Path:
+    """Copy the entries and switching models of library ``source`` into the new library ``destination``, published
+    in one step (a kill leaves no library or the whole copy)."""
+    if destination.exists():
+        raise GaitlibError(f"{destination} exists already; it is not replaced by a copy of {source}")
+    lib = Library(source)
+    with staged_folder(destination) as staging:
+        for name in [*lib.gaits(), Library.SWITCHING]:
+            if (lib.root / name).is_dir():
+                shutil.copytree(lib.root / name, staging / name)
+    return destination
+
+
+def _preset(lib: Library, name: str) -> str | None:
+    """The preset entry ``name`` was trained with, as its metadata records it (``None``: unreadable)."""
+    try:
+        return json.loads((lib.root / name / "metadata.json").read_text())["training"]["preset"]["name"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None

@@ -1,0 +1,131 @@
+"""The shipped library is never clobbered: training writes into the user's own library by default, replaces a
+shipped entry only with --replace, keeps the tests' preset out of trained libraries; ``gaitlib library`` names
+what is stale with the commands that fix it, and those commands do fix it."""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from cli_runner import gaitlib_quick
+from conftest import copy_library
+
+from gaitlib.training import Library
+from gaitlib.training.library import shipped_library_dir
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess[str]:
+    """``gaitlib ARGS`` in a child process started in ``cwd`` (whose ``gaitlib/`` package it imports, if any)."""
+    return subprocess.run(
+        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
+        capture_output=True, text=True, cwd=cwd, timeout=600, env=env,
+    )
+
+
+def git(*args: str, cwd: Path) -> str:
+    command = ["git", "-c", "user.name=test", "-c", "user.email=test@example.org", *args]
+    return subprocess.run(command, cwd=cwd, check=True, capture_output=True, text=True).stdout
+
+
+@pytest.fixture
+def fresh_copy(tmp_path) -> Path:
+    """The repository's files as a fresh clone would hold them (this working tree's, committed in a new git repo)."""
+    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=REPO, check=True,
+                            capture_output=True, text=True).stdout.split()
+    copy = tmp_path / "gaitlib"
+    for name in listed:
+        if (REPO / name).is_file():
+            (copy / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / name, copy / name)
+    git("init", "-q", cwd=copy)
+    git("add", "-A", cwd=copy)
+    git("commit", "-q", "-m", "fresh", cwd=copy)
+    return copy
+
+
+def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alone(fresh_copy) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "GAITLIB_LIBRARY"}
+    trained = run("train", "stand", "--iterations", "1", "--eval-episodes", "2", cwd=fresh_copy, env=env)
+    assert trained.returncode == 0, trained.stderr
+    assert "runs/library is your own library, made now as a copy of the shipped" in trained.stderr
+    assert "next: the switching models do not drive 4 pair(s), pace-stand, stand-pace, stand-trot, trot-stand" in (
+        trained.stderr
+    )
+    assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
+    mine = Library(fresh_copy / "runs" / "library")
+    assert mine.gaits() == ("pace", "stand", "trot")
+    assert mine.entry("stand").metadata["training"]["iterations"] == 1
+    shipped = Library(fresh_copy / "library")
+    assert mine.entry("trot").identity == shipped.entry("trot").identity
+    assert mine.entry("stand").identity != shipped.entry("stand").identity
+
+    main_job = run("run", "--from", "trot", "--to", "stand", "--json", cwd=fresh_copy, env=env)
+    assert main_job.returncode == 0, main_job.stderr
+    assert json.loads(main_job.stdout)["switch_s"] >= 2.0 - 1e-6
+
+    refused = run("train", "stand", "--iterations", "1", "--library", "library", cwd=fresh_copy, env=env)
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.startswith("gaitlib: error: library/stand is part of the shipped library")
+    assert refused.stderr.count("\n") == 1 and "--replace" in refused.stderr
+    assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
+
+
+def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> None:
+    mine = tmp_path / "mine"
+    shutil.copytree(shipped_library_dir(), mine)
+    listed = sorted(p.name for p in mine.iterdir())
+    for library in (mine, shipped_library_dir()):
+        result = gaitlib_quick("train", "walk", "--preset", "tiny", "--library", str(library))
+        assert result.returncode == 2
+        assert "the 'tiny' preset is for tests (it learns nothing) and writes only into a library of its own" in (
+            result.stderr
+        )
+    assert sorted(p.name for p in mine.iterdir()) == listed  # no walk, no staging folder, no lock
+
+
+def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(switching_library, tmp_path) -> None:
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    before = library.entry("stand").identity
+    fine = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
+    assert fine["problems"] == [] and set(fine["switching"]["pairs"]) == {"stand-trot", "trot-stand"}
+
+    trained = run("train", "trot", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "1", "--seed", "5",
+                  "--library", str(library.root), "--run-dir", str(tmp_path / "runs"), cwd=tmp_path)
+    assert trained.returncode == 0, trained.stderr
+    assert f"replacing {library.root / 'trot'}: the switching models there were fitted on the old trot" in (
+        trained.stderr
+    )
+    status = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
+    assert {p: v["state"] for p, v in status["switching"]["pairs"].items()} == {
+        "stand-trot": "stale", "trot-stand": "stale"
+    }
+    (problem,) = status["problems"]
+    assert "do not drive 2 pair(s), stand-trot, trot-stand (retrained since the fit: trot)" in problem["text"]
+    collect, fit = problem["commands"]
+    assert collect.startswith(f"gaitlib collect --library {library.root} --pairs stand-trot,trot-stand --samples ")
+    assert fit.startswith(f"gaitlib fit --library {library.root} --data ")
+
+    refused = gaitlib_quick("run", "--from", "trot", "--to", "stand", "--library", str(library.root))
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    assert f"fix: {collect} && {fit}" in refused.stderr
+
+    # The commands as printed; the collection on 8 worlds instead of 256 (a choice of the machine, not of the samples).
+    for words in (shlex.split(collect)[1:] + ["--worlds", "8"], shlex.split(fit)[1:]):
+        done = run(*words, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+    after = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
+    assert after["problems"] == [] and {v["state"] for v in after["switching"]["pairs"].values()} == {"covered"}
+    assert Library(library.root).entry("stand").identity == before
+
+    ran = run("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--seconds", "3",
+              "--json", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert "stayed_up" in json.loads(ran.stdout)
