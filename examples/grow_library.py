@@ -49,7 +49,7 @@ def main() -> None:
     new_data = args.old_data.with_name(f"{args.old_data.stem}_{args.gait}.h5")
     collect(new_data, library=library, config=CollectConfig(samples=args.samples, push_max=400, pairs=new_pairs))
     files = [args.old_data, new_data]
-    report = fit_library(library, read_all(files), sources=files)  # old and new samples, merged by gait name
+    report = fit_library(library, read_all(files, current=library.identities()), sources=files)  # merged by gait
     for pair, accuracy in sorted(report.accuracy()["latent"].items()):
         print(f"{pair}: {100 * accuracy:.1f}%")
 

@@ -307,6 +307,35 @@ def test_files_of_a_grown_library_are_read_as_one(tmp_path) -> None:
         read_all([tmp_path / "old.h5", tmp_path / "other.h5"])
 
 
+def test_samples_of_a_policy_the_library_no_longer_holds_are_left_out_and_counted(tmp_path) -> None:
+    def write(path, identities, batch):
+        header = TransitionHeader(gaits=("stand", "trot"), identities=identities, latent_dim=4, settings={})
+        make_file(path, batch, header=header)
+
+    old, new = synthetic(10), synthetic(6, seed=1)
+    write(tmp_path / "old.h5", ("s" * 64, "t" * 64), old)  # trot retrained since: its pairs are stale
+    write(tmp_path / "new.h5", ("s" * 64, "u" * 64), new)
+    merged = read_all([tmp_path / "old.h5", tmp_path / "new.h5"], current={"stand": "s" * 64, "trot": "u" * 64})
+    assert merged.header.gaits == ("stand", "trot") and merged.header.identities == ("s" * 64, "u" * 64)
+    np.testing.assert_array_equal(merged.samples.latent, new.latent.astype(np.float32))  # every old pair has trot
+    assert merged.info.count == 6 and "old.h5: 10 samples of pairs with trot left out" in merged.info.note
+    with pytest.raises(TransitionDataError, match="no sample of .*old.h5 was collected with the library's current"):
+        read_all([tmp_path / "old.h5"], current={"stand": "s" * 64, "trot": "u" * 64})
+
+
+def test_collect_reports_samples_finished_inside_the_chunk_under_way(tiny_library, tmp_path, monkeypatch) -> None:
+    from gaitlib.transitions import cycle
+
+    monkeypatch.setattr(cycle, "REPORT_EVERY_S", 0.0)  # a report after every control step
+    seen = []
+    config = dataclasses.replace(QUICK, samples=8, batch_size=8)
+    collect(tmp_path / "t.h5", library=tiny_library, config=config, progress=seen.append)
+    inside = [p.under_way for p in seen if p.samples == 0]
+    assert inside[-1] > 0 and inside == sorted(inside)  # samples show before the one chunk is committed
+    assert all(p.samples + p.under_way <= 8 for p in seen) and seen[-1].samples == 8
+    assert seen[-1].under_way == 0
+
+
 def test_a_success_chains_into_the_next_sample_without_a_reset(interrupted) -> None:
     path = interrupted[0]
     s = read(path).samples
