@@ -140,7 +140,7 @@ def _run_one(
     try:
         _require_device(sizes.device)
         values = job()
-    except Exception as error:  # noqa: BLE001 - one failed measurement must not stop the others
+    except Exception as error:  # one failed measurement must not stop the others
         traceback.print_exc(file=sys.stderr)
         message = (str(error).splitlines() or [""])[0]
         values = {"error": f"{type(error).__name__}: {message}"}

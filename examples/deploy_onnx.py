@@ -48,7 +48,7 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
         values = {"joint_pos": d.qpos[q], "projected_gravity": -rot[6:9], "ang_vel_trunk": d.qvel[3:6],
                   "foot_contact": [float(f in touching) for f in feet], "prev_action": action}
         frame = np.concatenate([np.asarray(values[s["name"]]) / s["divided_by"] for s in obs["frame"]])
-        history = [frame] * obs["history"]["frames"] if not history else [frame] + history[:-1]  # newest first
+        history = [frame] * obs["history"]["frames"] if not history else [frame, *history[:-1]]  # newest first
         o = history + [row(phase + k * step)[:width] for k in ref["offsets_steps"]]
         if "heading" in obs:  # the reference's heading minus the trunk's, wrapped to [-pi, pi)
             o.append([(start_yaw + row(phase)[width] - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])

@@ -11,6 +11,7 @@ import argparse
 
 import torch
 
+from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
 
@@ -18,7 +19,7 @@ from gaitlib.sim import make_backend
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sequence", default="trot,stand,pace,trot,stand")
-    parser.add_argument("--strategy", default="net")
+    parser.add_argument("--strategy", default=DEFAULT_STRATEGY)
     parser.add_argument("--settle", type=float, default=1.5, help="time in a gait before the next request, s")
     args = parser.parse_args()
 

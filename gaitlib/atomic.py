@@ -77,10 +77,9 @@ def stale_temporaries(path: Path) -> list[Path]:
 
 def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:
     """Write ``payload`` as JSON to ``path`` atomically."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "w") as handle:
-            json.dump(payload, handle, indent=indent)
-            handle.write("\n")
+    with atomic_path(path) as tmp, open(tmp, "w") as handle:
+        json.dump(payload, handle, indent=indent)
+        handle.write("\n")
     return Path(path)
 
 

@@ -25,7 +25,7 @@ import itertools
 import os
 import uuid
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -100,7 +100,7 @@ def require_ray():
 
 
 def run_ordered(
-    tasks: Sequence[Any], *, spec: WorkerSpec, cluster: ClusterConfig | None = None
+    tasks: Iterable[Any], *, spec: WorkerSpec, cluster: ClusterConfig | None = None
 ) -> Iterator[tuple[Any, Any]]:
     """``(task, result)`` for every task, in task order: in this process without ``cluster``, else on Ray workers
     (see the module doc). Closing the iterator early stops the workers; a task's own error is raised as is."""
@@ -110,7 +110,7 @@ def run_ordered(
         yield from _run_on_ray(tasks, spec, cluster)
 
 
-def _run_here(tasks: Sequence[Any], spec: WorkerSpec) -> Iterator[tuple[Any, Any]]:
+def _run_here(tasks: Iterable[Any], spec: WorkerSpec) -> Iterator[tuple[Any, Any]]:
     worker = spec.factory(**spec.kwargs)
     try:
         for task in tasks:
@@ -139,7 +139,7 @@ class _Host:
         return os.getpid()
 
 
-def _run_on_ray(tasks: Sequence[Any], spec: WorkerSpec, cluster: ClusterConfig) -> Iterator[tuple[Any, Any]]:
+def _run_on_ray(tasks: Iterable[Any], spec: WorkerSpec, cluster: ClusterConfig) -> Iterator[tuple[Any, Any]]:
     ray = require_ray()
     started = not ray.is_initialized()
     if started:
@@ -150,7 +150,7 @@ def _run_on_ray(tasks: Sequence[Any], spec: WorkerSpec, cluster: ClusterConfig) 
             raise ClusterError(f"cannot start or reach {where}: {str(error).splitlines()[0]}") from None
     pool = _Pool(ray, spec, cluster)
     try:
-        yield from pool.results(list(tasks))
+        yield from pool.results(tasks)
     finally:
         pool.stop()
         if started:
@@ -174,29 +174,40 @@ class _Pool:
     def _start(self):
         return self._remote.options(name=next(self._names), **self._options).remote(self._spec)
 
-    def results(self, tasks: list[Any]) -> Iterator[tuple[Any, Any]]:
+    def results(self, tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        """``(task, result)`` in task order; ``tasks`` is read lazily, no further than the window ahead."""
         ray = self._ray
-        todo = deque(range(len(tasks)))
-        running: dict[Any, tuple[int, Any]] = {}  # object ref -> (task index, actor)
-        done: dict[int, Any] = {}
+        source = enumerate(tasks)
+        todo: deque[tuple[int, Any]] = deque()  # (index, task) to run, a dead actor's task first
+        running: dict[Any, tuple[int, Any, Any]] = {}  # object ref -> (task index, task, actor)
+        done: dict[int, tuple[Any, Any]] = {}
         window = 4 * len(self.actors)  # results held at most this far ahead of the next one due
         turn = 0
-        while turn < len(tasks):
-            idle = [a for a in self.actors if all(a is not b for _, b in running.values())]
-            while idle and todo and todo[0] < turn + window:
-                i, actor = todo.popleft(), idle.pop()
-                running[actor.run.remote(tasks[i])] = (i, actor)
+        while True:
+            idle = [a for a in self.actors if all(a is not b for _, _, b in running.values())]
+            while idle:
+                if not todo:
+                    following = next(source, None)
+                    if following is None:
+                        break
+                    todo.append(following)
+                if todo[0][0] >= turn + window:
+                    break
+                (i, task), actor = todo.popleft(), idle.pop()
+                running[actor.run.remote(task)] = (i, task, actor)
+            if not running:
+                return
             ready, _ = ray.wait(list(running), num_returns=1)
-            i, actor = running.pop(ready[0])
+            i, task, actor = running.pop(ready[0])
             try:
-                done[i] = ray.get(ready[0])
+                done[i] = (task, ray.get(ready[0]))
             except ray.exceptions.RayTaskError as error:  # the task's own error, e.g. a one-line GaitlibError
                 raise error.cause from None
             except ray.exceptions.RayActorError:
                 self._replace(actor)
-                todo.appendleft(i)
+                todo.appendleft((i, task))
             while turn in done:
-                yield tasks[turn], done.pop(turn)
+                yield done.pop(turn)
                 turn += 1
 
     def _replace(self, dead) -> None:

@@ -113,7 +113,8 @@ def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
 
 def test_throughput_collect_reports_a_ratio_against_the_environment_step(switching_library) -> None:
     result = gaitlib(
-        "throughput", "collect", "--worlds", "4", "--seconds", "1", "--library", str(switching_library), "--json"
+        "throughput", "collect", "--worlds", "4", "--seconds", "1", "--chunk", "4", "--library", str(switching_library),
+        "--json",
     )
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)

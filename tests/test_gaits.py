@@ -76,7 +76,7 @@ def test_forward_kinematics_matches_mujoco() -> None:
     for sample, angles in enumerate(joint_pos):
         data.qpos[:] = 0.0
         data.qpos[3] = 1.0  # trunk at the origin with identity orientation: trunk frame = world frame
-        for name, angle in zip(c.JOINT_NAMES, angles):
+        for name, angle in zip(c.JOINT_NAMES, angles, strict=True):
             data.qpos[model.jnt_qposadr[model.joint(name).id]] = angle
         mujoco.mj_kinematics(model, data)
         for leg, foot in enumerate(c.FOOT_NAMES):
@@ -114,7 +114,7 @@ def test_registry_ships_gaits_and_rejects_unknown_names() -> None:
     trot = get_gait("trot")
     assert trot.stride_length == pytest.approx(trot.forward_speed / trot.stride_frequency)
     assert trot.period == pytest.approx(1.0 / trot.stride_frequency)
-    with pytest.raises(UnknownNameError, match="unknown gait 'moonwalk'.*trot"):
+    with pytest.raises(UnknownNameError, match=r"unknown gait 'moonwalk'.*trot"):
         get_gait("moonwalk")
 
 

@@ -38,7 +38,7 @@ def test_tiny_check_measures_everything_on_the_cpu() -> None:
     assert [line["worlds"] for line in sims] == [8]
     for line in sims:
         assert line["backend"] == "newton" and line["substeps"] == 8
-        assert 0 < line["env_steps_per_s"] and 0 < line["raw_eager_steps_per_s"]
+        assert line["env_steps_per_s"] > 0 and line["raw_eager_steps_per_s"] > 0
         assert line["raw_steps_per_s"] == max(line["raw_eager_steps_per_s"], line["raw_graph_steps_per_s"])
         assert line["ratio"] == pytest.approx(line["env_steps_per_s"] / line["raw_steps_per_s"], rel=0.01, abs=1e-3)
 

@@ -64,7 +64,7 @@ def test_a_foreign_model_is_adapted_in_memory_as_specified(variant_file) -> None
     assert robot.standing_height == pytest.approx(a1.STANDING_HEIGHT, abs=1e-4)
     assert robot.stance_contact_geoms == tuple(f"{leg}_calf_stance0" for leg in a1.LEG_NAMES)
     model = robot.build_model()
-    assert model.opt.timestep == pytest.approx(1 / 240) and 1 / 30 == pytest.approx(8 * model.opt.timestep)
+    assert model.opt.timestep == pytest.approx(1 / 240) and pytest.approx(8 * model.opt.timestep) == 1 / 30
     assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     assert model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.opt.impratio == 100  # kept
     original = mujoco.MjModel.from_xml_path(str(variant_file))

@@ -167,13 +167,13 @@ def test_a_fit_killed_midway_leaves_the_previous_switching_models_whole(switchin
 def test_a_second_writer_of_an_entry_is_refused_in_one_line(tiny_library, tmp_path) -> None:
     library = copy_library(tiny_library, tmp_path / "library")
     entry = library.entry("stand")
-    with publish._writer_lock(library.root / "stand"):
-        with pytest.raises(GaitlibError, match=rf"library/stand is being written by process {os.getpid()}$"):
-            library.save_entry(
-                description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
-                networks=entry.metadata["networks"], action=entry.action, observation=entry.observation,
-                training={}, evaluation={},
-            )
+    held = rf"library/stand is being written by process {os.getpid()}$"
+    with publish._writer_lock(library.root / "stand"), pytest.raises(GaitlibError, match=held):
+        library.save_entry(
+            description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+            networks=entry.metadata["networks"], action=entry.action, observation=entry.observation,
+            training={}, evaluation={},
+        )
     assert library.entry("stand").identity == tiny_library.entry("stand").identity
 
 
@@ -184,7 +184,7 @@ def test_a_library_with_the_old_switching_layout_gets_one_line(tiny_library, tmp
         library.check_switching()
     (library.root / "transition_net").mkdir()
     (library.root / "transition_net" / "net.pt").write_bytes(b"0.1")
-    with pytest.raises(TransitionDataError, match="in the old layout .* run gaitlib fit again"):
+    with pytest.raises(TransitionDataError, match=r"in the old layout .* run gaitlib fit again"):
         library.check_switching()
 
 

@@ -14,17 +14,17 @@ from gaitlib.training.trainer import TrainRequest, train_gait
 
 
 def request(tmp_path, gait="stand", **kw) -> TrainRequest:
-    base = dict(
-        description=get_gait(gait),
-        preset=get_preset("tiny"),
-        iterations=2,
-        library=tmp_path / "library",
-        run_dir=tmp_path / "runs" / gait,
-        backend="mujoco",
-        checkpoint_every=1,
-        eval_episodes=2,
-        eval_seconds=0.5,
-    )
+    base = {
+        "description": get_gait(gait),
+        "preset": get_preset("tiny"),
+        "iterations": 2,
+        "library": tmp_path / "library",
+        "run_dir": tmp_path / "runs" / gait,
+        "backend": "mujoco",
+        "checkpoint_every": 1,
+        "eval_episodes": 2,
+        "eval_seconds": 0.5,
+    }
     return TrainRequest(**(base | kw))
 
 
@@ -38,7 +38,7 @@ def trained(tmp_path_factory):
 
 
 def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
-    tmp_path, result, seen = trained
+    tmp_path, _result, seen = trained
     assert [s.iteration for s in seen] == [1, 2]
     assert seen[-1].samples == 2 * 4 * 8 and seen[-1].samples_per_s > 0
     assert set(seen[-1].reward_terms) == {"pose", "joint_velocity", "end_effector", "root_pose", "root_velocity"}

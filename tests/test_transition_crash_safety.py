@@ -113,7 +113,7 @@ def test_a_kill_anywhere_in_a_collection_loses_at_most_the_batch_in_flight(tiny_
     assert result.samples == 20 and result.written == 20 - len(before)
     assert_same(read(path).samples.select(slice(0, len(before))), before)
     assert leftovers(path) == []
-    assert [s["samples_at_start"] for s in validate(path).sessions][0] == 0
+    assert next(s["samples_at_start"] for s in validate(path).sessions) == 0
 
 
 def test_a_kill_at_every_step_of_an_append_and_its_merge_keeps_every_committed_sample(tmp_path, monkeypatch) -> None:
@@ -131,7 +131,7 @@ def test_a_kill_at_every_step_of_an_append_and_its_merge_keeps_every_committed_s
     assert calls.count("replace") == 4 and len(schema.scan(path)[0].parts) == 1  # part, index, merged part, index
     # Every change of primitive (first dataset of a file, its flush, its rename, the folder's flush, the first
     # removal, ...) and every seventh call.
-    for n, (before, call) in enumerate(zip(["", *calls], calls), start=1):
+    for n, (before, call) in enumerate(zip(["", *calls], calls, strict=False), start=1):
         if call == before and n % 7:
             continue
         path, code = attempt(n)

@@ -190,7 +190,7 @@ def test_other_schema_versions_are_clear_errors_and_version_1_is_read_only(tmp_p
     assert_same(read(old).samples, batch.select(slice(0, 4)))
     assert "version 1 transition file: read only" in validate(old).note
     before = old.read_bytes()
-    with pytest.raises(TransitionDataError, match="version 1 transition file .* collect into a new file"):
+    with pytest.raises(TransitionDataError, match=r"version 1 transition file .* collect into a new file"):
         open_writer(old, header=HEADER)
     assert old.read_bytes() == before
 
@@ -319,7 +319,7 @@ def test_samples_of_a_policy_the_library_no_longer_holds_are_left_out_and_counte
     assert merged.header.gaits == ("stand", "trot") and merged.header.identities == ("s" * 64, "u" * 64)
     np.testing.assert_array_equal(merged.samples.latent, new.latent.astype(np.float32))  # every old pair has trot
     assert merged.info.count == 6 and "old.h5: 10 samples of pairs with trot left out" in merged.info.note
-    with pytest.raises(TransitionDataError, match="no sample of .*old.h5 was collected with the library's current"):
+    with pytest.raises(TransitionDataError, match=r"no sample of .*old.h5 was collected with the library's current"):
         read_all([tmp_path / "old.h5"], current={"stand": "s" * 64, "trot": "u" * 64})
 
 
@@ -341,9 +341,9 @@ def test_a_success_chains_into_the_next_sample_without_a_reset(interrupted) -> N
     s = read(path).samples
     assert validate(path).header.settings["chain"] is True
     chained = after_failure = 0
-    for chunk, world in {(int(c), int(w)) for c, w in zip(s.chunk, s.world)}:  # a chunk starts every world afresh
+    for chunk, world in {(int(c), int(w)) for c, w in zip(s.chunk, s.world, strict=True)}:  # each chunk starts afresh
         rows = s.select((s.chunk == chunk) & (s.world == world))
-        for prev, cur in zip(range(len(rows) - 1), range(1, len(rows))):
+        for prev, cur in zip(range(len(rows) - 1), range(1, len(rows)), strict=True):
             gap = rows.switch_time[cur] - rows.switch_time[prev]  # a chained switch comes a horizon + 0-1 s later
             if rows.success[prev] and QUICK.horizon_s - 1e-3 <= gap <= QUICK.horizon_s + QUICK.source_extra_s + 1e-3:
                 assert rows.source[cur] == rows.dest[prev]  # the destination went on and became the next source

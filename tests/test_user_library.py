@@ -118,7 +118,7 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(switching
     assert f"fix: {collect} && {fit}" in refused.stderr
 
     # The commands as printed; the collection on 8 worlds instead of 256 (a choice of the machine, not of the samples).
-    for words in (shlex.split(collect)[1:] + ["--worlds", "8"], shlex.split(fit)[1:]):
+    for words in ([*shlex.split(collect)[1:], "--worlds", "8"], shlex.split(fit)[1:]):
         done = run(*words, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
     after = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)

@@ -41,6 +41,7 @@ from gaitlib.atomic import write_json
 from gaitlib.benchmark.gap import DeploymentGap
 from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
+from gaitlib.defaults import COMPARED
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
@@ -74,7 +75,7 @@ class SweepConfig:
     """What the sweep runs (checked when built: one-line errors). Everything but ``backend`` and ``device`` must match
     to resume: the worlds' count decides which world draws which random numbers, so it changes the results."""
 
-    strategies: tuple[str, ...] = ("random", "value", "tmt", "tmt-value", "net")
+    strategies: tuple[str, ...] = COMPARED
     """Strategy names (:func:`gaitlib.strategies.strategy_names`)."""
     magnitudes: tuple[float, ...] = default_magnitudes()
     """Push magnitudes, N."""

@@ -18,13 +18,14 @@ import typer
 from gaitlib.errors import GaitlibError
 
 __all__ = [
+    "CHUNK",
     "COUNT",
+    "DELAY_STEPS",
     "EPISODE_SECONDS",
     "MAX_MAGNITUDES",
     "MEASURE_SECONDS",
     "MOTOR_STRENGTH",
     "PUSH_N",
-    "DELAY_STEPS",
     "SEED",
     "WORKERS",
     "WORLDS",
@@ -34,11 +35,11 @@ __all__ = [
     "bounded",
     "check_worlds",
     "cluster_config",
+    "parse_magnitudes",
+    "parse_pairs",
     "ray_address_argument",
     "ray_option",
     "workers_option",
-    "parse_magnitudes",
-    "parse_pairs",
 ]
 
 WORLD_BYTES = 1 << 20
@@ -108,6 +109,8 @@ MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
 WORKERS = Bounds(low=1, high=4096, whole=True)
 """Ray workers of one job (each a process with its own simulator)."""
+CHUNK = Bounds(low=1, high=1e7, whole=True)
+"""Samples per chunk of a collection (its unit of work and of a commit)."""
 
 
 def bounded(default, *names: str, help: str, bounds: Bounds):

@@ -22,6 +22,7 @@ from gaitlib.cli.options import (
     ray_option,
     workers_option,
 )
+from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 
 __all__ = ["benchmark_command", "run_command"]
 
@@ -30,7 +31,7 @@ def run_command(
     source: str = typer.Option("trot", "--from", help="Gait the robot starts in."),
     dest: str = typer.Option("stand", "--to", help="Gait requested."),
     strategy: str = typer.Option(
-        "net-lookahead", "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
+        DEFAULT_STRATEGY, "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
     ),
     request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s, in [0, --seconds)."),
     push: float = bounded(
@@ -110,7 +111,7 @@ def run_command(
 
 def benchmark_command(
     strategies: str = typer.Option(
-        "random,value,tmt,tmt-value,net,net-lookahead", "--strategies", help="Comma-separated strategies to compare."
+        ",".join(COMPARED), "--strategies", help="Comma-separated strategies to compare."
     ),
     magnitudes: str = typer.Option(
         "0:500:50",

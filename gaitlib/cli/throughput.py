@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from gaitlib.cli.options import MEASURE_SECONDS, PUSH_N, WORLDS, Bounds, bounded
+from gaitlib.cli.options import CHUNK, MEASURE_SECONDS, PUSH_N, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
 __all__ = ["app"]
@@ -63,6 +63,9 @@ def collect_throughput(
         60.0, "--seconds", help="Wall-clock time per measurement (three are made);", bounds=MEASURE_SECONDS
     ),
     push_max: float = bounded(400.0, "--push-max", help="Largest push of the collection;", bounds=PUSH_N),
+    chunk: int | None = bounded(
+        None, "--chunk", help="Samples per chunk of the collection (default: collect's, 16 per world);", bounds=CHUNK
+    ),
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
@@ -74,7 +77,7 @@ def collect_throughput(
 
     check_worlds("--worlds", worlds, backend=backend)
     result = measure_collect_throughput(
-        Library(library), worlds=worlds, seconds=seconds, push_max=push_max, backend=backend
+        Library(library), worlds=worlds, seconds=seconds, push_max=push_max, chunk=chunk, backend=backend
     )
     if as_json:
         print(json.dumps(result.as_dict()))

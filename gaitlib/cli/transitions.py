@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.cli.options import (
+    CHUNK,
     COUNT,
     PUSH_N,
     SEED,
@@ -54,7 +55,7 @@ def collect_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     chunk: int | None = bounded(
         None, "--chunk", help="Samples per chunk, the unit of work and of a commit (default: 16 per world);",
-        bounds=Bounds(low=1, high=1e7, whole=True),
+        bounds=CHUNK,
     ),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),

@@ -80,7 +80,7 @@ class ImitationEnv(VecEnv):
         self.num_actions = backend.robot.num_joints
         self.device = backend.device
         self.dt = backend.control_dt
-        self.max_episode_length = int(round(cfg.episode_seconds / self.dt))
+        self.max_episode_length = round(cfg.episode_seconds / self.dt)
         self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         self.last_episode_length = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         """(N,) length in control steps of each world's last finished episode."""

@@ -226,7 +226,8 @@ class ReferenceClip:
         lower = position.floor().long().clamp(0, intervals - 1)
         weight = (position - lower).unsqueeze(-1)
         row = table[lower] * (1.0 - weight) + table[lower + 1] * weight
-        values = dict(zip((n for n, _ in _TABLE_FIELDS), row.split([w for _, w in _TABLE_FIELDS], dim=-1)))
+        columns = row.split([w for _, w in _TABLE_FIELDS], dim=-1)
+        values = dict(zip((n for n, _ in _TABLE_FIELDS), columns, strict=True))
         shift = cycles.unsqueeze(-1) * displacement
         count = phase.shape[0]
         return ClipFrame(

@@ -88,7 +88,7 @@ class GaitDescription:
         offsets = tuple(self.phase_offsets)
         if len(offsets) != len(LEG_NAMES):
             raise fail(f"phase_offsets needs {len(LEG_NAMES)} values ({', '.join(LEG_NAMES)}), got {len(offsets)}")
-        for leg, offset in zip(LEG_NAMES, offsets):
+        for leg, offset in zip(LEG_NAMES, offsets, strict=True):
             if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0.0 <= offset < 1.0:
                 raise fail(f"phase offset of {leg} must be a number in [0, 1) cycles, got {offset!r}")
         object.__setattr__(self, "phase_offsets", tuple(float(o) for o in offsets))

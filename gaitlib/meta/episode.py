@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
@@ -69,7 +70,7 @@ def run_episode(
     *,
     source: str,
     dest: str,
-    strategy: str = "net",
+    strategy: str = DEFAULT_STRATEGY,
     request_s: float = 2.0,
     push_n: float = 0.0,
     seconds: float = 6.0,

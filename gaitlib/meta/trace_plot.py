@@ -40,7 +40,7 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     ax_height.plot(t, trace.root_height, color="black")
     ax_height.set_ylabel("trunk height (m)")
     if trace.push.any():
-        pushed = dict(where=trace.push > 0, step="pre", color="tab:red", alpha=0.2)
+        pushed = {"where": trace.push > 0, "step": "pre", "color": "tab:red", "alpha": 0.2}
         ax_height.fill_between(t, 0, 1, transform=ax_height.get_xaxis_transform(), label="push", **pushed)
         ax_height.legend(loc="upper left", fontsize=8)
     contact = trace.foot_contact.T.astype(float)

@@ -14,7 +14,7 @@ from typing import Any
 
 from gaitlib.registry import Registry
 
-__all__ = ["RobotSpec", "get_robot", "register_robot", "robot_names"]
+__all__ = ["RobotSpec", "get_robot", "register_robot"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -82,11 +82,6 @@ def get_robot(name: str = "a1") -> RobotSpec:
     """Return the registered robot called ``name``; raises :class:`~gaitlib.errors.UnknownNameError` for an unknown
     name."""
     return _ROBOTS.get(name)
-
-
-def robot_names() -> list[str]:
-    """Names of the registered robots."""
-    return sorted(_ROBOTS.names())
 
 
 def _register_a1() -> None:

@@ -41,7 +41,7 @@ from gaitlib.errors import SimulationError
 from gaitlib.robots import RobotSpec
 from gaitlib.robots.a1 import constants as a1
 
-__all__ = ["INTEGRATOR", "compile_variant", "load_variant", "model_sha256"]
+__all__ = ["INTEGRATOR", "load_variant", "model_sha256"]
 
 INTEGRATOR = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
 """Integrator of an adapted model (gaitlib's A1 uses it too): the PD servo's ``kv`` damping is integrated
@@ -87,13 +87,6 @@ def _model_files(path: Path, root: Path, *, depth: int) -> list[bytes]:
     for name in includes:
         parts += _model_files(root / name, root, depth=depth + 1)
     return parts
-
-
-def compile_variant(path: Path | str, *, torque_limit: float = a1.TORQUE_LIMIT) -> mujoco.MjModel:
-    """The A1 MJCF at ``path`` adapted for gaitlib (see the module doc) and compiled. Raises
-    :class:`SimulationError` naming what is missing or wrong."""
-    spec, _ = _adapt(Path(path), torque_limit=torque_limit)
-    return _compile(spec, Path(path))
 
 
 def load_variant(path: Path | str, *, motor_strength: float = 1.0) -> RobotSpec:

@@ -12,6 +12,7 @@ per thread; ``mj_step`` releases the GIL, so the chunks advance in parallel. PD 
 from __future__ import annotations
 
 import copy
+import itertools
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -98,7 +99,7 @@ class MujocoBackend(SimBackend):
 
         n_threads = max(1, min(threads or os.cpu_count() or 1, num_worlds))
         bounds = np.linspace(0, num_worlds, n_threads + 1).astype(int)
-        self._chunks = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+        self._chunks = [(int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
         self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="gaitlib-mujoco")
         # torch's intra-op threads busy-wait between the many small tensor ops around each step and starve the
         # MuJoCo threads (measured: 10-25x slower small ops and updates on 2 cores); one torch thread it is.

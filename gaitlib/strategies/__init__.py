@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 from gaitlib.errors import TransitionDataError
 from gaitlib.library import library_status
 from gaitlib.registry import Registry
@@ -24,6 +25,8 @@ from gaitlib.strategies.value import ValueStrategy
 from gaitlib.training.library import Library
 
 __all__ = [
+    "COMPARED",
+    "DEFAULT_STRATEGY",
     "NET_THRESHOLD",
     "PHASE_GRID",
     "Decision",

@@ -15,7 +15,7 @@ transition-net, refused at load time when the library's policies are not the one
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -138,11 +138,11 @@ def build_table(
             table.thresholds[name][(m, n)] = best_threshold(scores[name][rows], x.success[rows])
     table.info = {
         "data": source,
-        "samples": int(len(x)),
+        "samples": len(x),
         "bins": bins,
         "score": "alive rate (successes + 1) / (samples + 2) per cell",
         "calibration": "per ordered pair, the threshold of largest balanced accuracy on the same data",
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     return table
 

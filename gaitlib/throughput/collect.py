@@ -53,10 +53,11 @@ class CollectThroughput:
 
 
 def measure_collect_throughput(
-    library: Library, *, worlds: int, seconds: float, push_max: float, backend: str = "mujoco"
+    library: Library, *, worlds: int, seconds: float, push_max: float, chunk: int | None = None, backend: str = "mujoco"
 ) -> CollectThroughput:
     """Time the reference rollout, a collection, and the reference again, ``seconds`` each (the collection runs
-    whole chunks of 16 samples per world, so it may take longer: about 70 s at 256 worlds on a 2-core CPU)."""
+    whole chunks of ``chunk`` samples, by default collect's 16 per world, so it may take longer: about 70 s at 256
+    worlds on a 2-core CPU)."""
     setup = load_switching(library)
     reference = [_rollout_steps_per_s(setup, worlds, seconds, push_max, backend)]
     with tempfile.TemporaryDirectory() as scratch:
@@ -65,6 +66,7 @@ def measure_collect_throughput(
             num_worlds=worlds,
             push_max=push_max,
             backend=backend,
+            batch_size=chunk,
             time_limit_s=seconds,
         )
         result = collect(Path(scratch) / "throughput.h5", library=library, config=config)

@@ -12,6 +12,7 @@ Backend and references are timed in alternating rounds so that a change of machi
 from __future__ import annotations
 
 import contextlib
+import itertools
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -117,7 +118,7 @@ def _mujoco_references(
         d.qpos[:], d.qvel[:], d.ctrl[:] = qp, qv, qp[7:]
         mujoco.mj_forward(model, d)
     bounds = np.linspace(0, n, threads + 1).astype(int)
-    chunks = [range(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True) if hi > lo]
+    chunks = [range(lo, hi) for lo, hi in itertools.pairwise(bounds) if hi > lo]
     spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
     roll_state = np.empty((n, mujoco.mj_stateSize(model, spec)))
     for i, d in enumerate(datas):
@@ -179,7 +180,7 @@ def mujoco_warp_references(backend) -> dict[str, Callable[[], None]]:
         with wp.ScopedDevice(device), wp.ScopedCapture(device=device, force_module_load=False) as capture:
             for _ in range(substeps):
                 mujoco_warp.step(model, data)
-    except Exception:  # noqa: BLE001 - Warp raises several types; the eager reference still measures
+    except Exception:  # Warp raises several types; the eager reference still measures
         return {"raw_eager": eager}
     graph = capture.graph
 

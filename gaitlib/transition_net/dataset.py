@@ -59,7 +59,7 @@ def balanced_split(
         if k == 0:
             skipped.append((m, n))
             continue
-        v = int(round(k * validation_fraction))
+        v = round(k * validation_fraction)
         if validation_fraction > 0 and k >= 2:
             v = min(max(v, 1), k - 1)
         for kept in (positives[:k], negatives[:k]):

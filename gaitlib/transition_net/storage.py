@@ -13,7 +13,7 @@ import dataclasses
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import torch
@@ -73,7 +73,7 @@ def save_net(path: Path, result: FitResult) -> Path:
         },
         "fit": dataclasses.asdict(result.config),
         "versions": {"gaitlib": gaitlib.__version__, "torch": torch.__version__},
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     metadata = json.loads(json.dumps(metadata))  # plain lists and dicts only: loadable with weights_only=True
     with atomic_path(path) as tmp:

@@ -43,9 +43,9 @@ import dataclasses
 import itertools
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -191,14 +191,14 @@ def collect(
         tasks = _plan(target.count, target.next_chunk, cfg, len(pairs))
         target.record_session(
             {
-                "first_chunk": tasks[0].chunk,
+                "first_chunk": target.next_chunk,
                 "samples_at_start": target.count,
                 "chunk_seeds": f"numpy.random.SeedSequence([{cfg.seed}, chunk]).generate_state(2): env, draws",
                 "chunk_samples": cfg.chunk_samples,
                 "num_worlds": cfg.num_worlds,
                 "ray": cluster is not None,
                 "torch": torch.__version__,
-                "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                "started": datetime.now(UTC).isoformat(timespec="seconds"),
             },
         )
         if cluster is not None:
@@ -234,19 +234,20 @@ def _header(
     return schema.TransitionHeader(gaits=gaits, identities=identities, latent_dim=shared.latent_dim, settings=settings)
 
 
-def _plan(count: int, next_chunk: int, cfg: CollectConfig, num_pairs: int) -> list[ChunkTask]:
-    """The chunks that take the file from ``count`` samples to ``cfg.samples``: chunk ``next_chunk`` on, each of
+def _plan(count: int, next_chunk: int, cfg: CollectConfig, num_pairs: int) -> Iterator[ChunkTask]:
+    """The chunks that take the file from ``count`` samples to ``cfg.samples``, made as they are asked for (a run
+    with a time limit may ask for few of very many): chunk ``next_chunk`` on, each of
     :meth:`CollectConfig.chunk_samples` samples (the last one fewer), each pair's quota the same within one, the
     extra samples rotating over the pairs from chunk to chunk (so pairs stay within one of each other per chunk)."""
-    size, tasks = cfg.chunk_samples, []
+    size = cfg.chunk_samples
     for chunk in itertools.count(next_chunk):
         n = min(size, cfg.samples - count)
         if n <= 0:
-            return tasks
+            return
         base, extra = divmod(n, num_pairs)
         first = (chunk * extra) % num_pairs
         quota = [base + int((p - first) % num_pairs < extra) for p in range(num_pairs)]
-        tasks.append(ChunkTask(chunk, tuple(quota)))
+        yield ChunkTask(chunk, tuple(quota))
         count += n
 
 

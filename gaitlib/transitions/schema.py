@@ -141,21 +141,20 @@ def write_index(path: Path, index: TransitionIndex) -> None:
     """Replace the index of ``path`` with ``index`` (durably: what it lists is on disk before, and the new index
     after this returns)."""
     header = index.header
-    with atomic_path(path, durable=True) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["schema"] = SCHEMA_NAME
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            f.attrs["gaits"] = np.array(header.gaits, dtype=h5py.string_dtype())
-            f.attrs["library_identities"] = np.array(header.identities, dtype=h5py.string_dtype())
-            f.attrs["latent_dim"] = int(header.latent_dim)
-            f.attrs["explicit_layout"] = json.dumps(EXPLICIT_LAYOUT)
-            f.attrs["settings"] = json.dumps(header.settings, sort_keys=True)
-            f.attrs["sessions"] = json.dumps(list(index.sessions))
-            f.attrs["created_by"] = index.provenance["created_by"]
-            f.attrs["created"] = index.provenance["created"]
-            f.attrs["count"] = sum(p.rows for p in index.parts)
-            table = np.array([(p.file, p.rows, p.sha256) for p in index.parts], dtype=_PART_DTYPE)
-            f.create_dataset("parts", data=table, maxshape=(None,))
+    with atomic_path(path, durable=True) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["schema"] = SCHEMA_NAME
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        f.attrs["gaits"] = np.array(header.gaits, dtype=h5py.string_dtype())
+        f.attrs["library_identities"] = np.array(header.identities, dtype=h5py.string_dtype())
+        f.attrs["latent_dim"] = int(header.latent_dim)
+        f.attrs["explicit_layout"] = json.dumps(EXPLICIT_LAYOUT)
+        f.attrs["settings"] = json.dumps(header.settings, sort_keys=True)
+        f.attrs["sessions"] = json.dumps(list(index.sessions))
+        f.attrs["created_by"] = index.provenance["created_by"]
+        f.attrs["created"] = index.provenance["created"]
+        f.attrs["count"] = sum(p.rows for p in index.parts)
+        table = np.array([(p.file, p.rows, p.sha256) for p in index.parts], dtype=_PART_DTYPE)
+        f.create_dataset("parts", data=table, maxshape=(None,))
 
 
 def scan(path: Path, *, keep: tuple[str, ...] = ()) -> tuple[TransitionIndex, dict[str, np.ndarray]]:

@@ -17,7 +17,7 @@ import json
 import signal
 import threading
 from collections.abc import Iterator
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import h5py
@@ -167,7 +167,7 @@ def _tier(rows: int) -> int:
 def _provenance() -> dict:
     versions = {"gaitlib": gaitlib.__version__, "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version,
                 "numpy": np.__version__}
-    return {"created_by": json.dumps(versions), "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    return {"created_by": json.dumps(versions), "created": datetime.now(UTC).isoformat(timespec="seconds")}
 
 
 def _clean(path: Path, index: schema.TransitionIndex) -> str | None:
