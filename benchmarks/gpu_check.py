@@ -61,6 +61,8 @@ class CheckSizes:
     """Worlds of the collection measurement."""
     collect_seconds: float
     """Wall-clock time of each of its three parts (reference rollout, collection, reference rollout), s."""
+    collect_chunk: int | None
+    """Samples per chunk of that collection (``None``: collect's default, 16 per world)."""
     push_max: float
     """Largest push of the collection, N."""
 
@@ -76,6 +78,7 @@ FULL = CheckSizes(
     eval_seconds=5.0,
     collect_worlds=4096,
     collect_seconds=15.0,
+    collect_chunk=None,
     push_max=400.0,
 )
 """One H100, under 8 minutes."""
@@ -91,6 +94,7 @@ TINY = CheckSizes(
     eval_seconds=0.5,
     collect_worlds=8,
     collect_seconds=0.7,
+    collect_chunk=8,
     push_max=400.0,
 )
 """The CPU in CI: every measurement, a few worlds, a second or two each."""
@@ -274,6 +278,7 @@ def measure_collect(sizes: CheckSizes) -> dict[str, object]:
         worlds=sizes.collect_worlds,
         seconds=sizes.collect_seconds,
         push_max=sizes.push_max,
+        chunk=sizes.collect_chunk,
         backend=sizes.jobs_backend,
     )
     return {

@@ -1,7 +1,7 @@
 """Collection and the benchmark sweep on Ray workers (issue 15): the same file and the same results as without Ray
 for the same seed and chunking, whatever the number of workers, and a killed worker loses no committed sample.
-Skipped where Ray is not installed (CI needs no Ray); the one-line refusal of ``--ray`` without Ray is tested in
-``test_refusals.py``."""
+Ray comes with the test install (``.[test]``), so these run in CI; the one-line refusal of ``--ray`` without Ray is
+tested in ``test_refusals.py``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+import ray
 from cli_runner import gaitlib
 from conftest import copy_library
 from test_benchmark import TINY
@@ -19,8 +20,6 @@ from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.cluster import WORKER_PREFIX, ClusterConfig
 from gaitlib.meta import load_switching
 from gaitlib.transitions import CollectConfig, collect, read, validate
-
-ray = pytest.importorskip("ray")
 
 SMALL = CollectConfig(
     samples=40, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4, push_max=400.0, backend="mujoco",

@@ -20,8 +20,8 @@ from gaitlib.envs.randomization import RandomizationConfig, sample_world_paramet
 from gaitlib.gaits import GaitDescription, clip_from_description
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
-from gaitlib.training import default_library_dir
 from gaitlib.training.deployment import deployment_block
+from gaitlib.training.library import shipped_library_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "deploy_onnx.py"
@@ -45,7 +45,7 @@ def _block(folder: Path, onnx_path: Path) -> dict:
 def trot_entry(request, tmp_path_factory) -> Path:
     """A trot policy.onnx beside a metadata.json holding nothing but the deployment block: the shipped trot (gaitlib
     0.1's observation layout, no heading error) and the tests' tiny trot (the current layout)."""
-    source = default_library_dir() if request.param == "shipped" else request.getfixturevalue("tiny_library").root
+    source = shipped_library_dir() if request.param == "shipped" else request.getfixturevalue("tiny_library").root
     entry = tmp_path_factory.mktemp("entry") / "trot"
     entry.mkdir()
     shutil.copy(source / "trot" / "policy.onnx", entry / "policy.onnx")
@@ -118,8 +118,7 @@ def test_the_block_states_the_numbers_the_environment_uses(trot_entry: Path) -> 
 
 @pytest.mark.parametrize("gait", ["stand", "trot", "pace"])
 def test_shipped_entries_carry_the_current_deployment_block(gait: str) -> None:
-    folder = default_library_dir() / gait
+    folder = shipped_library_dir() / gait
     meta = json.loads((folder / "metadata.json").read_text())
-    if "deployment" not in meta:
-        pytest.skip(f"library/{gait}/metadata.json has no deployment block yet")
+    assert meta["format_version"] == 2 and "deployment" in meta  # format 2 promises the block
     assert meta["deployment"] == _block(folder, folder / "policy.onnx")

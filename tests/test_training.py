@@ -185,3 +185,21 @@ def test_garbage_metadata_is_refused(trained, tmp_path) -> None:
     (library / "stand" / "metadata.json").write_text("{not json")
     with pytest.raises(LibraryError, match="unreadable metadata"):
         Library(library).entry("stand")
+
+
+def test_eval_averages_over_the_steps_it_sums() -> None:
+    """The trot's reference runs at a constant 1.45 m/s: over 30 steps the mean is that, not 29/30 of it (the step
+    that ends an episode counts for its length, not for the means)."""
+    from gaitlib.envs import EnvConfig
+    from gaitlib.training import Library
+    from gaitlib.training.evaluate import evaluate_policy
+    from gaitlib.training.library import shipped_library_dir
+
+    library = Library(shipped_library_dir())
+    trot = library.entry("trot")
+    result = evaluate_policy(
+        trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
+        episodes=2, seconds=1.0, backend="mujoco", seed=0,
+    )
+    assert trot.description.forward_speed == 1.45 and result.mean_episode_seconds == pytest.approx(1.0)
+    assert result.reference_speed == pytest.approx(1.45, rel=1e-5)

@@ -84,7 +84,7 @@ def evaluate_policy(
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
         t = _run_episodes(env, policy)
         counted = t["alive_steps"].clamp(min=1)
-        total_alive = t["alive_steps"].sum().clamp(min=1)
+        total_alive = t["summed_steps"].sum().clamp(min=1)  # the steps whose speeds and errors were summed
         mean_speed = float(t["speed"].sum() / total_alive)
         mean_ref = float(t["ref_speed"].sum() / total_alive)
         error = abs(mean_speed - mean_ref)
@@ -108,12 +108,14 @@ def evaluate_policy(
 
 def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
     """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, turned (more than 90
-    degrees from its start while up), alive steps, summed squared joint error, forward and reference speed, and the
-    last absolute heading change while up, rad."""
+    degrees from its start while up), alive steps (the episode's length), the steps summed over (those after which
+    the world was still up), summed squared joint error, forward and reference speed, and the last absolute heading
+    change while up, rad."""
     n, dev = env.num_envs, env.device
     alive = torch.ones(n, dtype=torch.bool, device=dev)
     t = {"fell": torch.zeros(n, dtype=torch.bool, device=dev), "turned": torch.zeros(n, dtype=torch.bool, device=dev)}
-    t |= {k: torch.zeros(n, device=dev) for k in ("alive_steps", "sq_error", "speed", "ref_speed", "heading_change")}
+    names = ("alive_steps", "summed_steps", "sq_error", "speed", "ref_speed", "heading_change")
+    t |= {k: torch.zeros(n, device=dev) for k in names}
     start_yaw = yaw_of(env.sim_state.root_quat)
     obs = env.get_observations()
     for _ in range(env.max_episode_length):
@@ -131,5 +133,6 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         t["sq_error"] += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
         t["speed"] += live * quat_rotate_inverse(quat_from_yaw(yaw), s.root_lin_vel)[:, 0]
         t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
-        t["alive_steps"] += live + ended.float()
+        t["summed_steps"] += live
+        t["alive_steps"] += live + ended.float()  # the step that ends an episode counts for its length
     return t

@@ -133,7 +133,7 @@ class CollectProgress:
     """Control steps (summed over worlds) this run took per sample written."""
     under_way: int = 0
     """Samples finished in the chunk under way, not yet in the file (chunks collected in this process; a chunk on
-    a Ray worker shows when it is committed)."""
+    a Ray worker shows when it is committed). 0: the report of a commit; more: a report from inside a chunk."""
 
     @property
     def success_rates(self) -> dict[tuple[str, str], float]:

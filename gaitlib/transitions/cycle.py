@@ -67,8 +67,9 @@ class ChunkWorker:
     chunk (a fresh environment on the same simulator, every world reset). Build it with keyword arguments only, so
     that Ray can build it in an actor.
 
-    ``report``: called with the samples the chunk under way has finished so far, about every
-    :data:`REPORT_EVERY_S` (a worker in this process only: it is how the progress display moves inside a chunk)."""
+    ``report``: called with the samples the chunk under way has finished so far (when there are more than at the
+    last call), about every :data:`REPORT_EVERY_S` (a worker in this process only: it is how the progress display
+    moves inside a chunk)."""
 
     def __init__(
         self,
@@ -101,13 +102,15 @@ class ChunkWorker:
             env, self._policies, pairs=self._pairs, quota=np.asarray(task.quota), cfg=self._cfg,
             latent_dim=self._header.latent_dim, seed=draw_seed,
         )
-        last = time.perf_counter()
+        last, reported = time.perf_counter(), 0
         with torch.inference_mode():
             while not cycles.done:
                 cycles.step()
                 if self._report is not None and time.perf_counter() - last >= REPORT_EVERY_S:
                     last = time.perf_counter()
-                    self._report(cycles.finished)
+                    if 0 < cycles.finished != reported:  # news only: a report always has samples under way
+                        reported = cycles.finished
+                        self._report(reported)
         batch = cycles.take()
         batch.chunk[:] = task.chunk
         return ChunkResult(batch, cycles.source_falls, cycles.world_steps)
