@@ -43,11 +43,11 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     more = str(tmp_path / "more.h5")  # a second file (as after growing the library): fitted together
     # Gaits named out of order are stored in the canonical order (issue 11: the user's order was kept, the net was
     # fitted for ['trot', 'stand'] and `gaitlib run` refused it).
-    named = gaitlib("collect", "--samples", "16", "--gaits", "trot,stand", "--out", more, "--library", lib, "--seed",
-                    "1", *QUICK)
+    named = gaitlib_quick("collect", "--samples", "16", "--gaits", "trot,stand", "--out", more, "--library", lib,
+                          "--seed", "1", *QUICK)
     assert named.returncode == 0, named.stderr
     assert validate(more).header.gaits == ("stand", "trot")
-    fitted = gaitlib("fit", "--data", data, "--data", more, "--epochs", "3", "--library", lib, "--json")
+    fitted = gaitlib_quick("fit", "--data", data, "--data", more, "--epochs", "3", "--library", lib, "--json")
     assert fitted.returncode == 0, fitted.stderr
     report = json.loads(fitted.stdout)
     assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48

@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 import ray
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 from conftest import copy_library
 from test_benchmark import TINY
 from test_transitions import GAITS, assert_same
@@ -35,12 +35,12 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     ran = gaitlib("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray", "--workers", "2")
     assert ran.returncode == 0, ran.stderr
     plain = str(tmp_path / "plain.h5")
-    assert gaitlib("collect", "--samples", "24", "--out", plain, "--library", lib, *quick).returncode == 0
+    assert gaitlib_quick("collect", "--samples", "24", "--out", plain, "--library", lib, *quick).returncode == 0
     assert_same(read(data).samples, read(plain).samples)
     with_ray, without = validate(data), validate(plain)
     assert (with_ray.header, with_ray.count) == (without.header, without.count) == (validate(data).header, 24)
     writable = str(copy_library(tiny_library, tmp_path / "library").root)  # fit writes switching/ into it
-    fitted = gaitlib("fit", "--data", data, "--epochs", "2", "--library", writable, "--json")
+    fitted = gaitlib_quick("fit", "--data", data, "--epochs", "2", "--library", writable, "--json")
     assert fitted.returncode == 0, fitted.stderr
     assert json.loads(fitted.stdout)["samples"] == 24
 
