@@ -11,7 +11,11 @@ import typer
 from gaitlib.cli.options import COUNT, DELAY_STEPS, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
-__all__ = ["eval_command", "train_command"]
+__all__ = ["SWITCH_START", "eval_command", "train_command"]
+
+SWITCH_START = 0.4
+"""The share of training episodes that start from another gait's handover state when ``--states`` is given: most
+episodes still start from the gait's own reference, which teaches the gait itself (``docs/training.md``)."""
 
 
 def _description(gait: str, gait_file: Path | None):
@@ -56,6 +60,14 @@ def train_command(
     replace: bool = typer.Option(
         False, "--replace", help="Replace the gait's entry in the shipped library (refused without it)."
     ),
+    states: Path | None = typer.Option(
+        None, "--states", help="Handover states of other gaits (gaitlib states) to start a share of episodes from."
+    ),
+    switch_start: float | None = bounded(
+        None, "--switch-start",
+        help="Share of episodes that start from a handover state (default: 0.4 with --states, else 0: the paper's "
+        "recipe);", bounds=Bounds(low=0, high=1),
+    ),
     run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
     checkpoint_every: int = bounded(50, "--checkpoint-every", help="Iterations between checkpoints;", bounds=COUNT),
@@ -87,6 +99,8 @@ def train_command(
         library=target,
         copy_from=copy_from,
         replace=replace,
+        states=states,
+        switch_start=switch_start if switch_start is not None else (SWITCH_START if states is not None else 0.0),
         run_dir=run_dir or Path("runs") / gait,
         backend=backend,
         seed=seed,

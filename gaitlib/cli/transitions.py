@@ -22,7 +22,7 @@ from gaitlib.cli.options import (
     workers_option,
 )
 
-__all__ = ["collect_command", "fit_command", "map_command"]
+__all__ = ["collect_command", "fit_command", "map_command", "states_command"]
 
 
 def collect_command(
@@ -110,6 +110,42 @@ def collect_command(
         + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items())),
         soft_wrap=True,
     )
+
+
+def states_command(
+    out: Path = typer.Option(Path("data/states.npz"), "--out", help="Handover-states file to write (.npz)."),
+    per_gait: float = bounded(
+        2e4, "--per-gait", help="States of each gait (2e4 is accepted);", bounds=Bounds(low=1, high=1e7, whole=True)
+    ),
+    push_max: float = bounded(0.0, "--push-max", help="Largest random push while the gaits run (0: none);",
+                              bounds=PUSH_N),
+    gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
+    worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Record handover states of a library's gaits as they run (body, velocities, observation history, previous
+    actions), for switch-start training: gaitlib train GAIT --states OUT."""
+    from rich.console import Console
+
+    from gaitlib.cli.options import check_worlds
+    from gaitlib.cli.progress import job_progress
+    from gaitlib.training import Library
+    from gaitlib.transitions.states import StatesConfig, record_states
+
+    check_worlds("--worlds", worlds, backend=backend)
+    lib = Library(library)
+    names = lib.order(gaits.split(",") if gaits else None)
+    config = StatesConfig(per_gait=int(per_gait), push_max=push_max, num_worlds=worlds, backend=backend, seed=seed)
+    console = Console(stderr=True)
+    with job_progress(console, "states") as progress:
+        task = progress.add_task("states", total=len(names) * config.per_gait, status="")
+        states = record_states(
+            lib, gaits=names, config=config, progress=lambda done, total: progress.update(task, completed=done)
+        )
+    states.save(out)
+    console.print(f"{out}: {len(states):,} handover states of {', '.join(states.gaits)}", soft_wrap=True)
 
 
 def _duration(seconds: float) -> str:

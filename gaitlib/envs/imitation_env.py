@@ -9,7 +9,9 @@ are built with latency and noise. See :mod:`gaitlib.envs.observations` for the l
 
 Beyond rsl-rl's contract the environment exposes what switching needs: :attr:`phase`, :meth:`switch` (make
 worlds imitate another gait from a chosen phase, at this moment), :meth:`reset_worlds` and the per-world
-reference :attr:`reference`.
+reference :attr:`reference`; and what switch-start training needs (:mod:`gaitlib.envs.handover`):
+:meth:`handover_states` (what a switch would hand over now) and :meth:`hand_over` (continue from such a state),
+which a share of resets use when the environment is given recorded states.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from tensordict import TensorDict
 
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs import rewards as rew_fn
+from gaitlib.envs.handover import HandoverStates
 from gaitlib.envs.randomization import (
     PushConfig,
     PushSchedule,
@@ -33,7 +36,8 @@ from gaitlib.envs.reference import ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.gaits import ReferenceClip
-from gaitlib.sim import SimBackend, SimState
+from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, yaw_of
+from gaitlib.sim import KinematicState, SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
 
@@ -72,7 +76,15 @@ class ImitationEnv(VecEnv):
         cfg: EnvConfig,
         *,
         seed: int = 0,
+        handover: HandoverStates | None = None,
+        handover_share: float = 0.0,
     ) -> None:
+        """``handover``: recorded states that a share ``handover_share`` of resets start from (switch-start), each
+        handed over at a uniformly random phase of the world's gait; ``None``: reference state initialization
+        only."""
+        if not 0.0 <= handover_share <= 1.0 or (handover_share > 0 and not handover):
+            raise ValueError("handover_share must be in [0, 1], and above 0 only with handover states")
+        self._handover, self._handover_share = handover, handover_share
         self.backend = backend
         self.cfg = cfg
         self.clips = clips
@@ -235,6 +247,60 @@ class ImitationEnv(VecEnv):
         reading = self._clean_frame()[world_ids]
         self._last_reading[world_ids] = reading
         self._history[world_ids] = reading.unsqueeze(1).expand(-1, obs_fn.HISTORY, -1)
+        if self._handover_share > 0:
+            chosen = world_ids[(torch.rand(k, generator=self._gen) < self._handover_share).to(self.device)]
+            if len(chosen):
+                rows = torch.randint(len(self._handover), (len(chosen),), generator=self._gen).numpy()
+                self.hand_over(chosen, self._handover.select(rows), torch.rand(len(chosen), generator=self._gen))
+                return
+        self._obs = self._observations()
+
+    def handover_states(self, world_ids: torch.Tensor) -> dict[str, torch.Tensor]:
+        """What a switch of worlds ``world_ids`` (k,) would hand over now, as the arrays of
+        :class:`~gaitlib.envs.handover.HandoverStates` (k rows each; yaw removed, see there)."""
+        s, ids = self._state, world_ids
+        unturn = quat_from_yaw(-yaw_of(s.root_quat[ids]))
+        return {
+            "source": self.reference.gait[ids],
+            "phase": self.reference.wrapped_phase[ids],
+            "root_height": s.root_pos[ids, 2],
+            "root_quat": quat_multiply(unturn, s.root_quat[ids]),
+            "root_lin_vel": quat_rotate(unturn, s.root_lin_vel[ids]),
+            "root_ang_vel": s.root_ang_vel[ids],
+            "joint_pos": s.joint_pos[ids],
+            "joint_vel": s.joint_vel[ids],
+            "history": self._history[ids],
+            "last_reading": self._last_reading[ids],
+            "action": self._action[ids],
+            "targets": self._targets[ids],
+        }
+
+    def hand_over(self, world_ids: torch.Tensor, states: HandoverStates, phase: torch.Tensor) -> None:
+        """Worlds ``world_ids`` (k,) continue from ``states`` (k rows: another gait's robot, the moment before a
+        switch) under their own gait from ``phase`` (k,), exactly as :meth:`switch` hands a robot over: its body,
+        velocities, observation history, last action and PD targets still under way are kept, and the reference is
+        anchored where it stands and faces. Their dynamics, pushes and episode clock are those of their reset."""
+        dev, k = self.device, len(world_ids)
+
+        def tensor(name: str) -> torch.Tensor:
+            return torch.as_tensor(getattr(states, name), dtype=torch.float32, device=dev)
+
+        root_pos = torch.zeros(k, 3, device=dev)
+        root_pos[:, 2] = tensor("root_height")
+        kinematic = KinematicState(
+            root_pos=root_pos, root_quat=tensor("root_quat"), root_lin_vel=tensor("root_lin_vel"),
+            root_ang_vel=tensor("root_ang_vel"), joint_pos=tensor("joint_pos"), joint_vel=tensor("joint_vel"),
+        )
+        self.backend.reset(world_ids, kinematic)
+        targets = tensor("targets")[:, : self._targets.shape[1]]
+        pad = self._targets.shape[1] - targets.shape[1]  # a shorter recorded delay line: the oldest target repeats
+        self._targets[world_ids] = torch.cat([targets, targets[:, -1:].expand(-1, pad, -1)], 1) if pad else targets
+        self._action[world_ids] = tensor("action")
+        self._history[world_ids] = tensor("history")
+        self._last_reading[world_ids] = tensor("last_reading")
+        self._state = s = self.backend.state()
+        gait = self.reference.gait[world_ids]
+        self.reference.start(world_ids, gait, phase.to(dev), s.root_pos[world_ids], s.root_quat[world_ids])
         self._obs = self._observations()
 
     # ------------------------------------------------------------------------------------------ internals

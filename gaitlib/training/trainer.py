@@ -32,6 +32,7 @@ from gaitlib.training.iteration_log import IterationLog, IterationStats, write_s
 from gaitlib.training.library import Library
 from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
+from gaitlib.training.switch_start import handover_states
 from gaitlib.training.target import check_target, copy_library
 
 __all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "train_gait"]
@@ -59,6 +60,12 @@ class TrainRequest:
     (the shipped library, for the user's own library's first write)."""
     replace: bool = False
     """Replace the entry of this gait in the shipped library (refused otherwise, before any work)."""
+    states: Path | None = None
+    """Handover states of other gaits (``gaitlib states``; :mod:`gaitlib.envs.handover`) that a share of the
+    training episodes start from; ``None``: every episode starts from the reference (the paper's recipe)."""
+    switch_start: float = 0.0
+    """The share of training episodes (resets) that start from a handover state, in [0, 1] (0: the paper's
+    recipe)."""
     run_dir: Path
     """Checkpoints and TensorBoard logs (``checkpoints/latest.pt``, ``events.*``)."""
     backend: str = "auto"
@@ -133,6 +140,7 @@ class GaitRunner(OnPolicyRunner):
         record = {
             "gait": self.request.description.name,
             "preset": self.request.preset.name,
+            "switch_start": self.request.switch_start,
             "seed": self.request.seed,
             "world_size": self.ranks.world_size,
             "samples": self.samples,
@@ -152,6 +160,11 @@ class GaitRunner(OnPolicyRunner):
             raise GaitlibError(
                 f"checkpoint {latest} is for gait '{record['gait']}' with preset '{record['preset']}', "
                 f"not '{gait}' with '{preset}'"
+            )
+        if record.get("switch_start", 0.0) != self.request.switch_start:
+            raise GaitlibError(
+                f"checkpoint {latest} trained with --switch-start {record.get('switch_start', 0.0):g}, not "
+                f"{self.request.switch_start:g}; resume with the same share"
             )
         try:
             self.alg.load(saved, None, strict=True)
@@ -242,11 +255,17 @@ def train_gait(
     preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
+    states, switch_start = handover_states(
+        request.states, request.switch_start, gait=request.description.name
+    )
     # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the preset's curriculum.
     env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=0.0))
     sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
     try:
-        runner = GaitRunner(ImitationEnv(sim, [clip], env_cfg, seed=seed), request)
+        env = ImitationEnv(
+            sim, [clip], env_cfg, seed=seed, handover=states, handover_share=request.switch_start if states else 0.0
+        )
+        runner = GaitRunner(env, request)
         if request.resume:
             runner.resume()
         runner.train(on_iteration=on_iteration)
@@ -254,13 +273,14 @@ def train_gait(
     finally:
         sim.close()
     try:
-        return _finish(runner, clip, backend_name, env_cfg, in_sync=in_sync) if ranks.main else None
+        return _finish(runner, clip, backend_name, env_cfg, switch_start, in_sync=in_sync) if ranks.main else None
     finally:
         leave()
 
 
 def _finish(
-    runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig, *, in_sync: bool
+    runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig, switch_start: dict | None,
+    *, in_sync: bool,
 ) -> TrainResult:
     """Evaluate the trained policy and write it, with its run record, into the library."""
     request, preset, alg = runner.request, runner.request.preset, runner.alg
@@ -294,6 +314,7 @@ def _finish(
             "samples": runner.samples,
             "wall_clock_s": round(runner.elapsed, 1),
             "seed": request.seed,
+            "switch_start": switch_start,
             "push_force_max_n": preset.push_max(runner.current_learning_iteration, request.iterations),
             "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
             "randomization": dataclasses.asdict(env_cfg.randomization),
