@@ -133,3 +133,28 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
               "--json", cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     assert "stayed_up" in json.loads(ran.stdout)
+
+
+def test_switching_models_drive_the_pairs_they_were_fitted_on_and_name_the_others(switching_library, tmp_path):
+    from gaitlib.errors import GaitlibError
+    from gaitlib.gaits import get_gait
+    from gaitlib.meta import load_switching
+    from gaitlib.meta.episode import run_episode
+    from gaitlib.training import get_preset
+    from gaitlib.training.trainer import TrainRequest, train_gait
+
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    train_gait(TrainRequest(description=get_gait("pace"), preset=get_preset("tiny"), iterations=1,
+                            library=library.root, run_dir=tmp_path / "runs", backend="mujoco", eval_episodes=1,
+                            eval_seconds=0.3))  # a gait added after the fit
+    status = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
+    states = {p: v["state"] for p, v in status["switching"]["pairs"].items()}
+    assert states == {"pace-stand": "uncovered", "pace-trot": "uncovered", "stand-pace": "uncovered",
+                      "stand-trot": "covered", "trot-pace": "uncovered", "trot-stand": "covered"}
+    setup = load_switching(library.root)
+    assert setup.gaits == ("stand", "trot")
+    trace = run_episode(setup, source="trot", dest="stand", strategy="net", request_s=0.2, seconds=0.6,
+                        deadline_s=0.3, backend="mujoco")
+    assert trace.switch_s is None or trace.switch_s >= 0.2 - 1e-6
+    with pytest.raises(GaitlibError, match=r"drive stand, trot, not pace; the switching models do not drive 4 pair"):
+        run_episode(setup, source="pace", dest="stand", request_s=0.2, seconds=0.6, backend="mujoco")

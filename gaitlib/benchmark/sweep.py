@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gaitlib.atomic import write_json
+from gaitlib.atomic import release_lock, stale_temporaries, take_lock, write_json
 from gaitlib.benchmark.gap import DeploymentGap
 from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
@@ -181,7 +181,20 @@ def run_sweep(
     pairs = _pairs(cfg, setup)
     settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
     identities = setup.resources.library.identities(setup.gaits)
-    results = open_results(out, settings, identities)
+    open_results(out, settings, identities)  # refuse other settings before anything is created
+    lock = out / "results.json.lock"
+    fd = take_lock(lock, writing=str(out / "results.json"), error=GaitlibError)  # one writer per --out
+    try:
+        for leftover in stale_temporaries(out / "results.json"):  # of a killed run (the lock says none runs)
+            leftover.unlink(missing_ok=True)
+        return _sweep(out, setup, cfg, pairs, open_results(out, settings, identities), identities, progress, cluster)
+    finally:
+        release_lock(lock, fd)
+
+
+def _sweep(out: Path, setup: SwitchingSetup, cfg: SweepConfig, pairs: list, results: dict, identities: dict,
+           progress, cluster: ClusterConfig | None) -> dict:
+    """The groups of ``results`` not yet done, run and written one after the other (under the writer lock)."""
     groups = list(itertools.product(cfg.strategies, cfg.magnitudes))
     per_group = cfg.samples * len(pairs)
     total = per_group * len(groups)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import typer
 
@@ -22,6 +23,7 @@ __all__ = [
     "COUNT",
     "DELAY_STEPS",
     "EPISODE_SECONDS",
+    "IMPULSE_NS",
     "MAX_MAGNITUDES",
     "MEASURE_SECONDS",
     "MOTOR_STRENGTH",
@@ -33,10 +35,12 @@ __all__ = [
     "Bounds",
     "OptionError",
     "bounded",
+    "check_out_file",
     "check_worlds",
     "cluster_config",
     "parse_magnitudes",
     "parse_pairs",
+    "parse_values",
     "ray_address_argument",
     "ray_option",
     "workers_option",
@@ -109,6 +113,8 @@ MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
 WORKERS = Bounds(low=1, high=4096, whole=True)
 """Ray workers of one job (each a process with its own simulator)."""
+IMPULSE_NS = Bounds(low=0, high=200, unit="N s")
+"""Impulses of a single push (200 N s: 16 m/s of speed change for the A1, beyond anything it survives)."""
 CHUNK = Bounds(low=1, high=1e7, whole=True)
 """Samples per chunk of a collection (its unit of work and of a commit)."""
 
@@ -221,13 +227,18 @@ def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ..
 
 
 def parse_magnitudes(text: str) -> tuple[float, ...]:
-    """``START:STOP:STEP`` (STOP included) or a comma-separated list -> push magnitudes, N, each in
-    :data:`PUSH_N`, at most :data:`MAX_MAGNITUDES` of them (counted before any list is built)."""
+    """``--magnitudes``: push magnitudes, N, each in :data:`PUSH_N` (see :func:`parse_values`)."""
+    return parse_values(text, option="--magnitudes", bounds=PUSH_N, example="0:500:50")
+
+
+def parse_values(text: str, *, option: str, bounds: Bounds, example: str) -> tuple[float, ...]:
+    """``START:STOP:STEP`` (STOP included) or a comma-separated list -> values, each in ``bounds``, at most
+    :data:`MAX_MAGNITUDES` of them (counted before any list is built)."""
     try:
         if ":" in text:
             start, stop, step = (float(v) for v in text.split(":"))
             for value in (start, stop):
-                PUSH_N.check("--magnitudes", value)
+                bounds.check(option, value)
             if not (math.isfinite(step) and step > 0 and stop >= start):
                 raise ValueError
             span = (stop - start) / step  # STOP included: span + 1 values (a tolerance of float rounding)
@@ -239,9 +250,19 @@ def parse_magnitudes(text: str) -> tuple[float, ...]:
             values = tuple(float(v) for v in text.split(",") if v.strip())
             count = len(values)
     except ValueError:
-        raise OptionError(f"--magnitudes '{text}': give START:STOP:STEP (e.g. 0:500:50) or a list") from None
+        raise OptionError(f"{option} '{text}': give START:STOP:STEP (e.g. {example}) or a list") from None
     if not 1 <= count <= MAX_MAGNITUDES:
-        raise OptionError(f"--magnitudes '{text}': give 1 to {MAX_MAGNITUDES} values")
+        raise OptionError(f"{option} '{text}': give 1 to {MAX_MAGNITUDES} values")
     for value in values:
-        PUSH_N.check("--magnitudes", value)
+        bounds.check(option, value)
+    values = tuple(v + 0.0 for v in values)  # -0 is 0
+    if len(set(values)) != len(values):
+        raise OptionError(f"{option} '{text}': a value is given twice")
     return values
+
+
+def check_out_file(option: str, path: Path) -> Path:
+    """``path`` if it can name a file to write (not empty, not an existing folder); one line otherwise."""
+    if not str(path).strip() or path.is_dir():
+        raise OptionError(f"{option} must name a file, got '{path}'" + (" (a folder)" if path.is_dir() else ""))
+    return path

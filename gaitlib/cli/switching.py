@@ -49,7 +49,7 @@ def run_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
     """Run one robot in --from, request --to, and let the meta-controller switch with --strategy."""
-    from gaitlib.cli.options import OptionError
+    from gaitlib.cli.options import OptionError, check_out_file
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
@@ -58,6 +58,9 @@ def run_command(
         raise OptionError(
             f"--request-at must be a finite number in [0, --seconds) = [0, {seconds:g}) s, got {request_at:g}"
         )
+    check_out_file("--plot", plot)
+    if video is not None:
+        check_out_file("--video", video)
     setup = load_switching(library)
     trace = run_episode(
         setup,

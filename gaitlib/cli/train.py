@@ -143,6 +143,36 @@ def train_command(
     _say_status(console, target, gait)
 
 
+def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int, plot: Path | None,
+                as_json: bool) -> None:
+    """``gaitlib eval GAIT --impulses ...``: the single-push curve as a table (or JSON) and a plot."""
+    from gaitlib.benchmark.push_curve import SECTORS, single_push_curve, write_push_plot
+    from gaitlib.envs import EnvConfig
+
+    points = single_push_curve(
+        entry.policy, entry.clip, env_cfg=lib.shared_policy_settings([entry.name]).env_config(EnvConfig()),
+        impulses=impulses, episodes=episodes, backend=backend, seed=seed,
+    )
+    if plot is not None:
+        write_push_plot({entry.name: points}, plot)
+    if as_json:
+        print(json.dumps({"gait": entry.name, "points": [p.as_dict() for p in points]}))
+        return
+    from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
+
+    table = Table(title=f"{entry.name}: falls under one push of 0.1 s per episode ({episodes} episodes each, 95% "
+                        "interval), and per direction")
+    for column in ("impulse N s", "force N", "falls", *SECTORS):
+        table.add_column(column, justify="right")
+    for p in points:
+        rate = f"{100 * p.fall_rate:.1f}% [{100 * p.ci95[0]:.1f}, {100 * p.ci95[1]:.1f}]"
+        sectors = (f"{f}/{k}" for f, k in p.by_sector.values())
+        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate, *sectors)
+    table_console().print(table)
+
+
 def _say_status(console, library: Path, gait: str) -> None:
     """What the library a gait was just written into needs before it switches, and how to use it."""
     from gaitlib.library import library_status
@@ -165,18 +195,30 @@ def eval_command(
         None, "--action-delay", help="Control steps (33 ms) every action waits (default: training's random delay);",
         bounds=DELAY_STEPS,
     ),
+    impulses: str | None = typer.Option(
+        None, "--impulses",
+        help="Instead: one push per episode of each impulse, N s, START:STOP:STEP or a list (e.g. 0:30:3), in [0, "
+        "200]; fall rate per impulse (--episodes each) and direction, 0.1 s pushes at random phases.",
+    ),
+    plot: Path | None = typer.Option(None, "--plot", help="With --impulses: the curve as a PNG."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
-    """Evaluate a library policy under paper Table 1 randomization: falls, heading held, tracking errors."""
-    from gaitlib.cli.options import check_worlds
+    """Evaluate a library policy under paper Table 1 randomization: falls, heading held, tracking errors; or, with
+    --impulses, its fall rate against a single push's impulse."""
+    from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
     from gaitlib.envs import EnvConfig
     from gaitlib.training import Library
     from gaitlib.training.evaluate import evaluate_policy
 
     check_worlds("--episodes", episodes, backend=backend)
+    values = None if impulses is None else parse_values(impulses, option="--impulses", bounds=IMPULSE_NS,
+                                                        example="0:30:3")
     lib = Library(library)
     entry = lib.entry(gait)
+    if values is not None:
+        _push_curve(entry, lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot, as_json=as_json)
+        return
     result = evaluate_policy(
         entry.policy,
         entry.clip,

@@ -65,13 +65,14 @@ def collect_command(
     from rich.console import Console
     from rich.markup import escape
 
-    from gaitlib.cli.options import check_worlds, cluster_config, parse_pairs
+    from gaitlib.cli.options import check_out_file, check_worlds, cluster_config, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.training import Library
     from gaitlib.transitions import SUCCESS_HORIZON_S, CollectConfig, collect
 
     cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
+    check_out_file("--out", out)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
     config = CollectConfig(
@@ -84,7 +85,6 @@ def collect_command(
         seed=seed,
         batch_size=chunk,
     )
-    out.parent.mkdir(parents=True, exist_ok=True)
     console = Console(stderr=True)
     with job_progress(console, "collect") as progress:
         task = progress.add_task("collect", total=config.samples, status="building the worlds")

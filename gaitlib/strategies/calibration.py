@@ -13,6 +13,7 @@ finite parameters. It is fitted on collection data, never on benchmark runs, and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -136,6 +137,8 @@ def load_calibration(path: Path, *, identities: dict[str, str]) -> Calibration:
             m, _, n = text.partition("-")
             pairs[(index[m], index[n])] = (float(ab["a"]), float(ab["b"]))
         calibration = Calibration(gaits, dict(payload["library_identities"]), pairs, dict(payload["info"]))
+        if not all(math.isfinite(v) for ab in pairs.values() for v in ab):
+            raise ValueError("a pair's a or b is not a finite number")
     except (ValueError, KeyError, TypeError, AttributeError) as error:
         raise TransitionDataError(f"{path} is a damaged net calibration ({error!r}); run gaitlib fit") from error
     check_identities(calibration.identities, identities, what=f"net calibration {path}")

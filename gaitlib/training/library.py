@@ -341,6 +341,12 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
             f"library entry '{name}' was trained with another observation layout; retrain it with this gaitlib"
         )
     _check_action(name, metadata.get("action"))
+    named = {metadata.get("gait"), (metadata.get("description") or {}).get("name")}
+    if named != {name}:
+        raise LibraryError(
+            f"library entry '{name}' holds gait {sorted(map(str, named - {name}))} by its metadata; an entry's folder "
+            "is named after its gait (a policy copied into another gait's folder?)"
+        )
     weights = folder / "policy.pt"
     if not weights.is_file() or hashlib.sha256(weights.read_bytes()).hexdigest() != metadata.get("sha256"):
         raise LibraryError(f"library entry '{name}' is damaged: policy.pt is missing or does not match its checksum")

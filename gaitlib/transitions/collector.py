@@ -57,7 +57,7 @@ from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.sim import resolve_backend_name
-from gaitlib.training.library import Library, PolicySettings
+from gaitlib.training.library import Library, LibraryError, PolicySettings
 from gaitlib.transitions import schema
 from gaitlib.transitions.cycle import ChunkTask, ChunkWorker
 from gaitlib.transitions.writer import open_writer
@@ -180,6 +180,8 @@ def collect(
     inconsistent library entries, an ``output`` that is not a matching transition file.
     """
     cfg, output = config, Path(output)
+    if not library.root.is_dir():
+        raise LibraryError(f"no library at {library.root}")
     names = library.order(gaits)
     pairs = _check(cfg, names)
     shared = library.shared_policy_settings(names)

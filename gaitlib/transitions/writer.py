@@ -90,8 +90,14 @@ class TransitionWriter:
             raise TransitionDataError(f"batch has gait indices outside the file's {gaits} gaits")
         if len(batch):
             with _sigint_deferred():
-                self._commit((*self._index.parts, schema.write_part(self.path, batch, start=self.count)))
-                self._merge()
+                try:
+                    self._commit((*self._index.parts, schema.write_part(self.path, batch, start=self.count)))
+                    self._merge()
+                except RuntimeError as error:  # HDF5's own write errors (a full disk among them) come as these
+                    raise TransitionDataError(
+                        f"could not write {self.path} ({str(error).splitlines()[0]}); the {self.count:,} samples "
+                        "committed before are kept: free space and rerun to resume"
+                    ) from None
         return self.count
 
     def close(self) -> None:

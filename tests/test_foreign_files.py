@@ -1,0 +1,101 @@
+"""No silent wrong answers (issue 25): a file that is not what it claims, a second writer, a failing disk and odd
+paths each get one line before any work, and nothing already written is lost."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import pytest
+from cli_runner import gaitlib_quick
+from conftest import copy_library
+from test_benchmark import TINY
+from test_transitions import GAITS, QUICK
+
+from gaitlib.atomic import release_lock, take_lock
+from gaitlib.benchmark.sweep import run_sweep
+from gaitlib.errors import GaitlibError, TransitionDataError
+from gaitlib.meta import load_switching
+from gaitlib.strategies import SwitchResources, get_strategy
+from gaitlib.training import Library
+from gaitlib.training.library import LibraryError, shipped_library_dir
+from gaitlib.transitions import collect, schema, validate
+
+
+def one_line(result) -> str:
+    assert result.returncode == 2 and result.stdout == "" and result.stderr.count("\n") == 1, result.stderr
+    return result.stderr
+
+
+def test_an_entry_holding_another_gaits_policy_is_refused(tmp_path) -> None:
+    root = tmp_path / "library"
+    shutil.copytree(shipped_library_dir(), root)
+    for name in ("metadata.json", "policy.pt", "policy.onnx"):
+        shutil.copy(root / "trot" / name, root / "stand" / name)
+    with pytest.raises(LibraryError, match=r"^library entry 'stand' holds gait \['trot'\] by its metadata"):
+        Library(root).entry("stand")
+    assert "holds gait ['trot']" in one_line(gaitlib_quick("eval", "stand", "--library", str(root)))
+
+
+def test_a_nan_in_the_calibration_is_refused(switching_library, tmp_path) -> None:
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    payload = json.loads(library.calibration_path.read_text())
+    payload["pairs"]["trot-stand"]["a"] = float("nan")
+    library.calibration_path.write_text(json.dumps(payload))
+    with pytest.raises(TransitionDataError, match=r"damaged net calibration .*not a finite number"):
+        get_strategy("net-lookahead", SwitchResources(library=library, gaits=("stand", "trot")))
+
+
+def test_a_second_benchmark_into_one_out_is_refused_and_a_killed_ones_leftover_removed(switching_library, tmp_path):
+    setup, out = load_switching(switching_library), tmp_path / "bench"
+    out.mkdir()
+    leftover = out / ".results.json.abc123.tmp.json"  # what a run killed inside a write leaves
+    leftover.write_text("{")
+    lock = out / "results.json.lock"
+    fd = take_lock(lock, writing="test", error=GaitlibError)
+    try:
+        with pytest.raises(GaitlibError, match=r"results.json is being written by process \d+"):
+            run_sweep(out, setup, dataclasses.replace(TINY, magnitudes=(0.0,), strategies=("random",)))
+    finally:
+        release_lock(lock, fd)
+    assert not (out / "results.json").exists() and leftover.exists()
+    results = run_sweep(out, setup, dataclasses.replace(TINY, magnitudes=(0.0,), strategies=("random",)))
+    assert list(results["groups"]) == ["random@0"] and not leftover.exists()
+
+
+def test_a_failing_disk_during_collect_is_one_line_and_keeps_the_committed_samples(
+    tiny_library, tmp_path, monkeypatch
+) -> None:
+    path, real, calls = tmp_path / "t.h5", schema.write_part, []
+
+    def full_after_one(*args, **kwargs):
+        calls.append(1)
+        if len(calls) > 1:
+            raise RuntimeError("Can't write data (file write failed: errno = 28, 'No space left on device')")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(schema, "write_part", full_after_one)
+    with pytest.raises(TransitionDataError, match=r"could not write .*No space left.*the 8 samples committed before"):
+        collect(path, library=tiny_library, gaits=GAITS, config=dataclasses.replace(QUICK, samples=16))
+    assert validate(path).count == 8
+
+
+@pytest.mark.parametrize("out", ["", "."])
+def test_collect_into_an_empty_or_folder_path_is_one_line(out) -> None:
+    assert "--out must name a file" in one_line(gaitlib_quick("collect", "--samples", "8", "--out", out))
+
+
+def test_a_refused_collect_creates_nothing(tiny_library, tmp_path) -> None:
+    out = tmp_path / "new" / "t.h5"
+    refused = gaitlib_quick("collect", "--samples", "8", "--pairs", "trot-trot", "--out", str(out), "--library",
+                            str(tiny_library.root))
+    one_line(refused)
+    assert not (tmp_path / "new").exists()
+    missing = gaitlib_quick("collect", "--samples", "8", "--library", str(tmp_path / "nowhere"), "--out", str(out))
+    assert f"no library at {tmp_path / 'nowhere'}" in one_line(missing)
+
+
+def test_a_repeated_magnitude_and_a_folder_for_a_plot_are_refused_before_any_work(tmp_path) -> None:
+    assert "a value is given twice" in one_line(gaitlib_quick("benchmark", "--magnitudes", "0,-0"))
+    assert "--plot must name a file" in one_line(gaitlib_quick("run", "--plot", str(tmp_path)))
