@@ -15,8 +15,9 @@ import onnxruntime
 __all__ = ["deploy"]
 
 
-def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
-    """Drive the robot of ``m`` from the state in ``d``; yields (observation, action) before each control step."""
+def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float, start_phase: float = 0.0):
+    """Drive the robot of ``m`` from the state in ``d`` and the reference from ``start_phase``; yields (observation,
+    action) before each control step. Each target is applied at once: a delay of 0 steps, in the trained range."""
     dep = json.loads((Path(entry) / "metadata.json").read_text())["deployment"]
     robot, ctl, obs, ref, act = (dep[k] for k in ("robot", "control", "observation", "reference", "action"))
     joints = [m.joint(name) for name in robot["joint_names"]]
@@ -40,7 +41,8 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
         return rows[i] + (x - i) * (rows[i + 1] - rows[i])
 
     policy = onnxruntime.InferenceSession(str(Path(entry) / "policy.onnx"))
-    action, phase, history, rot, start_yaw = np.zeros(len(q)), 0.0, [], np.zeros(9), yaw(d.qpos[3:7])
+    action, phase, history, rot = np.zeros(len(q)), start_phase, [], np.zeros(9)
+    anchor = yaw(d.qpos[3:7]) - row(start_phase)[width]  # the reference faces the robot's heading at the start
     mujoco.mj_forward(m, d)
     for _ in range(round(seconds * ctl["rate_hz"])):
         mujoco.mju_quat2Mat(rot, d.qpos[3:7])  # trunk-to-world rotation R, row-major: R^T (0, 0, -1) = -R[2]
@@ -51,7 +53,7 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float):
         history = [frame] * obs["history"]["frames"] if not history else [frame, *history[:-1]]  # newest first
         o = history + [row(phase + k * step)[:width] for k in ref["offsets_steps"]]
         if "heading" in obs:  # the reference's heading minus the trunk's, wrapped to [-pi, pi)
-            o.append([(start_yaw + row(phase)[width] - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])
+            o.append([(anchor + row(phase)[width] - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])
         o = np.concatenate(o).astype(np.float32)
         action = np.clip(policy.run(None, {dep["onnx"]["inputs"][0]["name"]: o[None]})[0][0], -act["clip"], act["clip"])
         yield o, action
@@ -66,9 +68,14 @@ if __name__ == "__main__":
     block = json.loads((entry_dir / "metadata.json").read_text())["deployment"]
     ref = block["reference"]
     first = {c["name"]: ref["rows"][0][c["start"] : c["start"] + c["size"]] for c in ref["columns"]}
-    data = mujoco.MjData(model)  # start upright and at rest in the reference pose at phase 0
-    data.qpos[2], data.qpos[3:7] = first["root_height"][0], [1.0, 0.0, 0.0, 0.0]
-    data.qpos[[model.joint(name).qposadr[0] for name in block["robot"]["joint_names"]]] = first["joint_pos"]
+    start = ref["start_state"]
+    state = {c["name"]: start["rows"][0][c["start"] : c["start"] + c["size"]] for c in start["columns"]}
+    data = mujoco.MjData(model)  # start as training does: in the reference state at phase 0, facing world x
+    data.qpos[2], data.qpos[3:7] = first["root_height"][0], state["root_quat"]
+    data.qvel[0:3], data.qvel[3:6] = state["root_lin_vel"], state["root_ang_vel"]
+    joints = [model.joint(name) for name in block["robot"]["joint_names"]]
+    data.qpos[[j.qposadr[0] for j in joints]] = first["joint_pos"]
+    data.qvel[[j.dofadr[0] for j in joints]] = state["joint_vel"]
     for _ in deploy(model, data, entry_dir, float(sys.argv[3]) if len(sys.argv) > 3 else 10.0):
         pass
     print(f"after the run the trunk is {data.qpos[2]:.3f} m high and {data.qpos[0]:.2f} m ahead")

@@ -38,7 +38,10 @@ def _block(folder: Path, onnx_path: Path) -> dict:
     meta = json.loads((folder / "metadata.json").read_text())
     clip = clip_from_description(GaitDescription(**meta["description"]))
     observation = obs_fn.observation_config(meta["observation"])
-    return deployment_block(clip=clip, action=meta["action"], observation=observation, onnx_path=onnx_path)
+    delay = tuple(meta["training"].get("randomization", {}).get("action_delay_steps", (0, 0)))
+    return deployment_block(
+        clip=clip, action=meta["action"], observation=observation, onnx_path=onnx_path, action_delay_steps=delay
+    )
 
 
 @pytest.fixture(scope="module", params=["shipped", "tiny"])
@@ -122,3 +125,20 @@ def test_shipped_entries_carry_the_current_deployment_block(gait: str) -> None:
     meta = json.loads((folder / "metadata.json").read_text())
     assert meta["format_version"] == 2 and "deployment" in meta  # format 2 promises the block
     assert meta["deployment"] == _block(folder, folder / "policy.onnx")
+
+
+def test_the_block_states_where_training_starts_a_robot_and_the_delay_it_trained_with(trot_entry: Path) -> None:
+    """Row 0 of the start state is the environment's reference state initialization at phase 0 (no randomization),
+    velocities included; the trained action delay is the entry's."""
+    block = json.loads((trot_entry / "metadata.json").read_text())
+    deployment = block["deployment"]
+    clip = clip_from_description(GaitDescription(**block["description"]))
+    cfg = EnvConfig(randomization=RandomizationConfig(enabled=False), random_start_phase=False)
+    env = ImitationEnv(make_backend("mujoco", num_worlds=1), [clip], cfg)
+    s, start = env.sim_state, deployment["reference"]["start_state"]
+    row = {c["name"]: start["rows"][0][c["start"] : c["start"] + c["size"]] for c in start["columns"]}
+    np.testing.assert_allclose(row["root_quat"], s.root_quat[0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(row["root_lin_vel"], s.root_lin_vel[0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(row["root_ang_vel"], s.root_ang_vel[0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(row["joint_vel"], s.joint_vel[0].numpy(), atol=1e-5)
+    assert deployment["action"]["delay"]["trained_steps"] == [0, 1]

@@ -49,6 +49,7 @@ def deployment_block(
     action: Mapping[str, object],
     observation: obs_fn.ObservationConfig,
     onnx_path: Path,
+    action_delay_steps: tuple[int, int] = (0, 0),
     robot: str = "a1",
 ) -> dict:
     """The ``deployment`` block of a library entry (see the module docstring and ``docs/deploying.md``).
@@ -58,6 +59,7 @@ def deployment_block(
         action: the entry's action settings: ``type``, ``scale`` (rad per action unit), ``clip`` (action units).
         observation: the options of the observations the policy reads.
         onnx_path: the exported policy (read for its input and output names and shapes).
+        action_delay_steps: the range of control steps every action waited in training.
         robot: the registered robot the policy drives.
     """
     spec = get_robot(robot)
@@ -71,6 +73,13 @@ def deployment_block(
             "clip": float(action["clip"]),
             "pd_target": "clip(reference_joint_pos(phase + phase_per_step) + scale * clip(action, -clip, clip), "
             "joint_lower, joint_upper): the reference one control step ahead plus the scaled clipped action",
+            "delay": {
+                "trained_steps": [int(action_delay_steps[0]), int(action_delay_steps[1])],
+                "meaning": "in training every PD target reached the servos this many control steps after the action "
+                "was computed (one draw per episode, uniform in the range): run the policy with a delay in it",
+                "at_start": "until the first delayed target arrives, the servos hold the start pose: the reference "
+                "joint angles at the start phase",
+            },
         },
         "observation": _observation_facts(observation),
         "reference": _reference_facts(clip, control_dt, observation),
@@ -147,9 +156,10 @@ def _observation_facts(cfg: obs_fn.ObservationConfig) -> dict:
         facts["heading"] = {
             "start": obs_fn.ACTOR_OBS_DIM,
             "size": obs_fn.width(obs_fn.HEADING),
-            "meaning": "heading error: wrap(start_yaw + reference yaw(phase) - yaw) to [-pi, pi), rad, where yaw is "
-            "the trunk's yaw (rotation about world z) now, start_yaw the trunk's yaw when the policy started, and "
-            "reference yaw(phase) the reference table's yaw column",
+            "meaning": "heading error: wrap(start_yaw - reference yaw(start_phase) + reference yaw(phase) - yaw) to "
+            "[-pi, pi), rad, where yaw is the trunk's yaw (rotation about world z) now, start_yaw and start_phase "
+            "the trunk's yaw and the phase when the policy started, and reference yaw(phase) the reference table's "
+            "yaw column: the reference is anchored on the robot's heading at the start",
             "units": "rad",
         }
     return facts
@@ -179,7 +189,20 @@ def _reference_facts(clip: ReferenceClip, control_dt: float, cfg: obs_fn.Observa
         "rows": rows.tolist(),
     }
     if cfg.heading:  # the reference trunk's own yaw at each row, rad (0 for a gait built from a description)
-        facts["yaw"] = yaw_of(frame.root_quat).double().numpy().round(_DECIMALS).tolist()
+        facts["yaw"] = yaw_of(clip.frame(phases).root_quat).double().numpy().round(_DECIMALS).tolist()
+    start = torch.cat([frame.root_quat, frame.root_lin_vel, frame.root_ang_vel, frame.joint_vel], dim=1)
+    facts["start_state"] = {
+        "meaning": "where training starts a robot at the phase of each row (reference state initialization), facing "
+        "world x: trunk height (the rows' root_height) and joint angles (their joint_pos), and these",
+        "columns": [
+            {"name": "root_quat", "start": 0, "size": 4, "units": "1", "frame": "(w, x, y, z), yaw 0: qpos[3:7]"},
+            {"name": "root_lin_vel", "start": 4, "size": 3, "units": "m/s", "frame": "world, facing x: qvel[0:3]"},
+            {"name": "root_ang_vel", "start": 7, "size": 3, "units": "rad/s", "frame": "trunk: qvel[3:6]"},
+            {"name": "joint_vel", "start": 10, "size": start.shape[1] - 10, "units": "rad/s",
+             "frame": "joint, in joint_names order"},
+        ],
+        "rows": start.double().numpy().round(_DECIMALS).tolist(),
+    }
     return facts
 
 

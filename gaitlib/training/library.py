@@ -314,6 +314,7 @@ class Library:
                     action=action,
                     observation=observation,
                     onnx_path=staging / "policy.onnx",
+                    action_delay_steps=tuple(training.get("randomization", {}).get("action_delay_steps", (0, 0))),
                 ),
             }
             (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
