@@ -46,8 +46,8 @@ def _block(folder: Path, onnx_path: Path) -> dict:
 
 @pytest.fixture(scope="module", params=["shipped", "tiny"])
 def trot_entry(request, tmp_path_factory) -> Path:
-    """A trot policy.onnx beside a metadata.json holding nothing but the deployment block: the shipped trot (gaitlib
-    0.1's observation layout, no heading error) and the tests' tiny trot (the current layout)."""
+    """A trot policy.onnx beside a metadata.json holding nothing but the deployment block: the shipped trot and the
+    tests' tiny trot (both reading 159 values, the heading error included)."""
     source = shipped_library_dir() if request.param == "shipped" else request.getfixturevalue("tiny_library").root
     entry = tmp_path_factory.mktemp("entry") / "trot"
     entry.mkdir()

@@ -177,14 +177,10 @@ def test_a_second_writer_of_an_entry_is_refused_in_one_line(tiny_library, tmp_pa
     assert library.entry("stand").identity == tiny_library.entry("stand").identity
 
 
-def test_a_library_with_the_old_switching_layout_gets_one_line(tiny_library, tmp_path) -> None:
+def test_a_library_without_switching_models_names_the_commands_that_make_them(tiny_library, tmp_path) -> None:
     library = copy_library(tiny_library, tmp_path / "library")
     first_fit = r"has no transition-net and TMT yet; make them: gaitlib collect --library .* && gaitlib fit "
     with pytest.raises(TransitionDataError, match=first_fit):
-        library.check_switching()
-    (library.root / "transition_net").mkdir()
-    (library.root / "transition_net" / "net.pt").write_bytes(b"0.1")
-    with pytest.raises(TransitionDataError, match=r"in the old layout .* run gaitlib fit again"):
         library.check_switching()
 
 

@@ -173,16 +173,10 @@ class Library:
         return self.switching_dir / self.CALIBRATION
 
     def check_switching(self) -> None:
-        """Refuse, in one line, a library without fitted switching models, or with them in the layout of gaitlib
-        0.1 (``transition_net/`` and ``tmt/``, written one file at a time)."""
+        """Refuse, in one line with the commands that make them, a library without fitted switching models."""
         recover(self.switching_dir)
         if self.switching_dir.is_dir():
             return
-        if (self.root / "transition_net" / "net.pt").is_file():
-            raise TransitionDataError(
-                f"library {self.root} keeps its transition-net and TMT in the old layout (transition_net/, tmt/); "
-                "run gaitlib fit again to write switching/"
-            )
         raise TransitionDataError(
             f"library {self.root} has no transition-net and TMT yet; make them: {' && '.join(first_fit(self.root))}"
         )
