@@ -99,3 +99,16 @@ def test_a_refused_collect_creates_nothing(tiny_library, tmp_path) -> None:
 def test_a_repeated_magnitude_and_a_folder_for_a_plot_are_refused_before_any_work(tmp_path) -> None:
     assert "a value is given twice" in one_line(gaitlib_quick("benchmark", "--magnitudes", "0,-0"))
     assert "--plot must name a file" in one_line(gaitlib_quick("run", "--plot", str(tmp_path)))
+
+
+def test_a_truncated_or_foreign_policy_onnx_is_refused(tmp_path) -> None:
+    root = tmp_path / "library"
+    shutil.copytree(shipped_library_dir(), root)
+    onnx = root / "stand" / "policy.onnx"
+    onnx.write_bytes(onnx.read_bytes()[:1000])  # truncated: the file a user deploys
+    assert "policy.onnx is missing or does not match its checksum" in one_line(
+        gaitlib_quick("eval", "stand", "--library", str(root))
+    )
+    shutil.copy(root / "trot" / "policy.onnx", onnx)  # another gait's model
+    with pytest.raises(LibraryError, match="policy.onnx is missing or does not match"):
+        Library(root).entry("stand")

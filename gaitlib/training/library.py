@@ -303,6 +303,7 @@ class Library:
                 "evaluation": evaluation,
                 "versions": _versions(),
                 "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
+                "onnx_sha256": hashlib.sha256((staging / "policy.onnx").read_bytes()).hexdigest(),
                 "deployment": deployment_block(
                     clip=clip_from_description(description),
                     action=action,
@@ -345,6 +346,11 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
     weights = folder / "policy.pt"
     if not weights.is_file() or hashlib.sha256(weights.read_bytes()).hexdigest() != metadata.get("sha256"):
         raise LibraryError(f"library entry '{name}' is damaged: policy.pt is missing or does not match its checksum")
+    onnx = folder / "policy.onnx"  # the file a user deploys: checked where the entry records its checksum
+    if "onnx_sha256" in metadata and (
+        not onnx.is_file() or hashlib.sha256(onnx.read_bytes()).hexdigest() != metadata["onnx_sha256"]
+    ):
+        raise LibraryError(f"library entry '{name}' is damaged: policy.onnx is missing or does not match its checksum")
     try:
         state = torch.load(weights, map_location="cpu", weights_only=True)
         description = GaitDescription(**metadata["description"])
