@@ -110,5 +110,5 @@ def test_a_truncated_or_foreign_policy_onnx_is_refused(tmp_path) -> None:
         gaitlib_quick("eval", "stand", "--library", str(root))
     )
     shutil.copy(root / "trot" / "policy.onnx", onnx)  # another gait's model
-    with pytest.raises(LibraryError, match="policy.onnx is missing or does not match"):
+    with pytest.raises(LibraryError, match=r"policy.onnx is missing or does not match"):
         Library(root).entry("stand")

@@ -4,7 +4,6 @@ with tiny policies."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import shutil
 
 import h5py
@@ -110,7 +109,7 @@ def test_appended_batches_read_back_exactly(tmp_path) -> None:
     assert parts == ["part-000000000000-000000000005.h5", "part-000000000005-000000000012.h5"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5", "t.h5.parts"]  # the lock went with the writer
     with h5py.File(path) as f:
-        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION == 2
+        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION == 3
         assert f.attrs["count"] == 12 and [int(r) for r in f["parts"]["rows"]] == [5, 7]
     with h5py.File(schema.parts_folder(path) / parts[1]) as f:
         ds = f["latent"]
@@ -176,40 +175,30 @@ def test_foreign_and_non_hdf5_files_are_clear_errors(tmp_path) -> None:
     assert "no transition file" in one_line_error(tmp_path / "missing.h5")
 
 
-def test_other_schema_versions_are_clear_errors_and_version_1_is_read_only(tmp_path) -> None:
+def test_other_schema_versions_are_clear_errors(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(5))
+    for version in (1, 2, 4):
+        with h5py.File(path, "r+") as f:
+            f.attrs["schema_version"] = version
+        assert f"schema version {version}; this gaitlib reads version 3 only" in one_line_error(path)
+        before = path.read_bytes()
+        with pytest.raises(TransitionDataError, match=rf"schema version {version}; .*collect into a new file"):
+            open_writer(path, header=HEADER)
+        assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [("settings", '{"h": 2.5}'), ("gaits", ["trot", "stand"]), ("library_identities", ["x" * 64, "y" * 64]),
+     ("latent_dim", 5), ("sessions", '[{"seed": 9}]'), ("count", 4)],
+)
+def test_an_index_changed_after_it_was_written_is_refused(tmp_path, name, value) -> None:
+    """A flipped bit in the stored settings (a horizon read as another), swapped gaits or identities: each would
+    relabel or mis-judge samples silently; the index checksum refuses them."""
     path = make_file(tmp_path / "t.h5", synthetic(5))
     with h5py.File(path, "r+") as f:
-        f.attrs["schema_version"] = 3
-    assert "schema version 3; this gaitlib reads versions 1 and 2" in one_line_error(path)
-    old, batch = tmp_path / "v1.h5", synthetic(5)
-    with h5py.File(old, "w") as f:  # version 1: datasets in the file itself, rows past 'count' uncommitted
-        f.attrs.update(schema=schema.SCHEMA_NAME, schema_version=1, gaits=list(HEADER.gaits), latent_dim=4,
-                       library_identities=list(HEADER.identities), settings='{"h": 2.0}', sessions="[]",
-                       created_by="{}", created="2024-01-01T00:00:00+00:00", count=4)
-        for name, values in batch.columns().items():
-            f[name] = values
-    assert_same(read(old).samples, batch.select(slice(0, 4)))
-    assert "version 1 transition file: read only" in validate(old).note
-    before = old.read_bytes()
-    with pytest.raises(TransitionDataError, match=r"version 1 transition file .* collect into a new file"):
-        open_writer(old, header=HEADER)
-    assert old.read_bytes() == before
-
-
-def test_files_written_before_fall_times_were_recorded_read_them_as_nan(tmp_path) -> None:
-    path = tmp_path / "old.h5"
-    make_file(path, synthetic(6))
-    part = next((tmp_path / "old.h5.parts").glob("part-*.h5"))
-    # The file as gaitlib wrote it before the column existed: the part without 'fall_after' (checksum redone).
-    with h5py.File(part, "a") as f:
-        del f["fall_after"]
-    with h5py.File(path, "a") as f:
-        table = f["parts"][...]
-        table["sha256"][0] = hashlib.sha256(part.read_bytes()).hexdigest()
-        f["parts"][...] = table
-    samples = read(path).samples
-    assert len(samples) == 6 and np.all(np.isnan(samples.fall_after))
-    np.testing.assert_array_equal(samples.success, synthetic(6).success)
+        f.attrs[name] = value
+    assert "its index does not match its checksum" in one_line_error(path)
 
 
 def test_explicit_state_drops_the_actions_of_each_frame() -> None:

@@ -22,9 +22,6 @@ class Column:
     """SI units (``"1"`` for dimensionless, ``"index"``, ``"cycles"``)."""
     description: str
     """What the value is."""
-    missing: float | None = None
-    """The value of rows written before the column existed (files of an older gaitlib lack it); ``None``: every
-    file has the column."""
 
 
 COLUMNS: dict[str, Column] = {
@@ -41,10 +38,7 @@ COLUMNS: dict[str, Column] = {
     "switch_time": Column("float32", None, "s", "time of the switch since the world's episode start"),
     "world": Column("int32", None, "index", "world that produced the sample"),
     "chunk": Column("int32", None, "index", "write batch (counted over all collection runs of the file)"),
-    "fall_after": Column(
-        "float32", None, "s", "time from the switch to the fall; inf: up over the whole horizon; nan: not recorded",
-        missing=float("nan"),
-    ),
+    "fall_after": Column("float32", None, "s", "time from the switch to the fall; inf: up over the whole horizon"),
 }
 """The per-sample datasets, in file order."""
 

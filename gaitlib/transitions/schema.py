@@ -69,13 +69,14 @@ __all__ = [
 
 SCHEMA_NAME = "gaitlib.transitions"
 """Value of the ``schema`` attribute of an index."""
-SCHEMA_VERSION = 2
-"""Version of this layout; version 1 files are read only, other versions refused."""
+SCHEMA_VERSION = 3
+"""Version of this layout (3: the index carries ``index_sha256``); files of other versions are refused."""
 _PART_SCHEMA = "gaitlib.transitions.part"
 _PART_NAME = re.compile(r"part-(\d{12})-(\d{12})\.h5")
 _PART_DTYPE = np.dtype([("file", "S40"), ("rows", "<i8"), ("sha256", "S64")])
-_STEP = 1 << 17
-"""Rows checked at a time in a version 1 file."""
+_DIGESTED = ("gaits", "library_identities", "latent_dim", "explicit_layout", "settings", "sessions", "created_by",
+             "created", "count")
+"""The index attributes ``index_sha256`` covers, with the part list."""
 
 
 @dataclass(frozen=True)
@@ -92,11 +93,11 @@ class Part:
 
 @dataclass(frozen=True, kw_only=True)
 class TransitionIndex:
-    """What an index (or a version 1 file's attributes) says."""
+    """What an index says."""
 
     header: TransitionHeader
     parts: tuple[Part, ...]
-    """Committed parts in sample order (empty for version 1)."""
+    """Committed parts in sample order."""
     sessions: tuple[dict, ...]
     """One record per collection run (seed, first chunk, samples at its start, ...)."""
     provenance: dict
@@ -141,18 +142,23 @@ def write_index(path: Path, index: TransitionIndex) -> None:
     """Replace the index of ``path`` with ``index`` (durably: what it lists is on disk before, and the new index
     after this returns)."""
     header = index.header
+    attrs = {
+        "gaits": list(header.gaits),
+        "library_identities": list(header.identities),
+        "latent_dim": int(header.latent_dim),
+        "explicit_layout": json.dumps(EXPLICIT_LAYOUT),
+        "settings": json.dumps(header.settings, sort_keys=True),
+        "sessions": json.dumps(list(index.sessions)),
+        "created_by": index.provenance["created_by"],
+        "created": index.provenance["created"],
+        "count": sum(p.rows for p in index.parts),
+    }
     with atomic_path(path, durable=True) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["schema"] = SCHEMA_NAME
         f.attrs["schema_version"] = SCHEMA_VERSION
-        f.attrs["gaits"] = np.array(header.gaits, dtype=h5py.string_dtype())
-        f.attrs["library_identities"] = np.array(header.identities, dtype=h5py.string_dtype())
-        f.attrs["latent_dim"] = int(header.latent_dim)
-        f.attrs["explicit_layout"] = json.dumps(EXPLICIT_LAYOUT)
-        f.attrs["settings"] = json.dumps(header.settings, sort_keys=True)
-        f.attrs["sessions"] = json.dumps(list(index.sessions))
-        f.attrs["created_by"] = index.provenance["created_by"]
-        f.attrs["created"] = index.provenance["created"]
-        f.attrs["count"] = sum(p.rows for p in index.parts)
+        for name, value in attrs.items():
+            f.attrs[name] = np.array(value, dtype=h5py.string_dtype()) if isinstance(value, list) else value
+        f.attrs["index_sha256"] = _index_digest(attrs, index.parts)
         table = np.array([(p.file, p.rows, p.sha256) for p in index.parts], dtype=_PART_DTYPE)
         f.create_dataset("parts", data=table, maxshape=(None,))
 
@@ -172,8 +178,6 @@ def scan(path: Path, *, keep: tuple[str, ...] = ()) -> tuple[TransitionIndex, di
     while True:
         with _open(path, str(path)) as f:
             index = _read_index(f, path)
-            if index.version == 1:
-                return index, _scan_v1(f, index, keep, path)
         kept: dict[str, list[np.ndarray]] = {name: [] for name in keep}
         try:
             for part in index.parts:
@@ -286,9 +290,10 @@ def _read_index(f: h5py.File, path: Path) -> TransitionIndex:
         what = "no 'schema' attribute" if schema is None else f"schema '{schema}'"
         raise TransitionDataError(f"{path} is an HDF5 file but not gaitlib transition data ({what})")
     version = attrs.get("schema_version")
-    if version not in (1, SCHEMA_VERSION):
+    if version != SCHEMA_VERSION:
         raise TransitionDataError(
-            f"{path} has transition schema version {version}; this gaitlib reads versions 1 and {SCHEMA_VERSION}"
+            f"{path} has transition schema version {version}; this gaitlib reads version {SCHEMA_VERSION} only "
+            "(collect into a new file: CHANGELOG.md)"
         )
     try:
         header = TransitionHeader(
@@ -300,10 +305,14 @@ def _read_index(f: h5py.File, path: Path) -> TransitionIndex:
         count = int(attrs["count"])
         sessions = tuple(json.loads(attrs["sessions"]))
         provenance = {"created_by": str(attrs["created_by"]), "created": str(attrs["created"])}
-        table = f["parts"][()] if version == SCHEMA_VERSION else np.zeros(0, _PART_DTYPE)
-        parts = tuple(Part(row["file"].decode(), int(row["rows"]), row["sha256"].decode()) for row in table)
+        parts = tuple(Part(row["file"].decode(), int(row["rows"]), row["sha256"].decode()) for row in f["parts"][()])
+        stored = {name: attrs[name] for name in _DIGESTED}
+        stored |= {name: list(_text_list(stored[name])) for name in ("gaits", "library_identities")}
+        sound = _index_digest(stored, parts) == str(attrs["index_sha256"])
     except (KeyError, TypeError, ValueError, OSError) as error:
         raise TransitionDataError(f"{path} is damaged: index attribute or part list missing or malformed") from error
+    if not sound:
+        raise TransitionDataError(f"{path} is damaged: its index does not match its checksum (index_sha256)")
     if len(header.gaits) != len(header.identities) or not 2 <= len(header.gaits) <= 127:
         raise TransitionDataError(f"{path} is damaged: {len(header.gaits)} gaits, {len(header.identities)} identities")
     index = TransitionIndex(
@@ -324,7 +333,7 @@ def _check_parts(index: TransitionIndex, path: Path) -> None:
                 f"{path} is damaged: its part list has '{part.file}' ({part.rows} rows) at row {start}"
             )
         start += part.rows
-    if index.version == SCHEMA_VERSION and start != index.count:
+    if start != index.count:
         raise TransitionDataError(f"{path} is damaged: count {index.count} but its parts hold {start} samples")
 
 
@@ -332,8 +341,6 @@ def _rows(f: h5py.File, name: str, start: int, stop: int, header: TransitionHead
     """Rows ``start`` to ``stop`` of dataset ``name``, checked against the column's dtype and width."""
     column = COLUMNS[name]
     width = _width(column, header.latent_dim)
-    if column.missing is not None and name not in f:  # written before the column existed
-        return np.full((stop - start, *width), column.missing, dtype=column.dtype)
     try:
         ds = f[name]
         if ds.shape[1:] != width or ds.dtype != np.dtype(column.dtype) or ds.shape[0] < stop:
@@ -358,16 +365,11 @@ def _check_rows(columns: dict[str, np.ndarray], rows: int, header: TransitionHea
             )
 
 
-def _scan_v1(f: h5py.File, index: TransitionIndex, keep: tuple[str, ...], path: Path) -> dict[str, np.ndarray]:
-    """Check a version 1 file's committed rows; returns those of ``keep``."""
-    kept: dict[str, list[np.ndarray]] = {name: [] for name in keep}
-    for start in range(0, index.count, _STEP):
-        stop = min(index.count, start + _STEP)
-        columns = {name: _rows(f, name, start, stop, index.header, str(path)) for name in COLUMNS}
-        _check_rows(columns, stop - start, index.header, str(path))
-        for name in keep:
-            kept[name].append(columns[name])
-    return {name: _joined(values, COLUMNS[name], index.header) for name, values in kept.items()}
+def _index_digest(attrs: dict, parts: tuple[Part, ...]) -> str:
+    """SHA-256 of the index attributes :data:`_DIGESTED` (as stored) and the part list."""
+    values = [attrs[name] if isinstance(attrs[name], list) else str(attrs[name]) for name in _DIGESTED]
+    table = [[p.file, p.rows, p.sha256] for p in parts]
+    return hashlib.sha256(json.dumps([values, table]).encode()).hexdigest()
 
 
 def _joined(values: list[np.ndarray], column: Column, header: TransitionHeader) -> np.ndarray:
@@ -377,11 +379,8 @@ def _joined(values: list[np.ndarray], column: Column, header: TransitionHeader) 
 
 
 def _info(path: Path, index: TransitionIndex) -> TransitionFileInfo:
-    if index.version == 1:
-        note = f"{path} is a version 1 transition file: read only (collect into a new file to add samples)"
-    else:
-        listed = {p.file for p in index.parts}
-        folder = parts_folder(path)
-        stray = [p for p in folder.glob("part-*.h5") if p.name not in listed] if folder.is_dir() else []
-        note = f"{path}: {len(stray)} uncommitted part files are ignored" if stray else None
+    listed = {p.file for p in index.parts}
+    folder = parts_folder(path)
+    stray = [p for p in folder.glob("part-*.h5") if p.name not in listed] if folder.is_dir() else []
+    note = f"{path}: {len(stray)} uncommitted part files are ignored" if stray else None
     return TransitionFileInfo(index.header, index.count, list(index.sessions), note)

@@ -140,19 +140,14 @@ def open_writer(path: Path, *, header: TransitionHeader) -> TransitionWriter:
     """Lock ``path`` and open it for appending samples of ``header`` (a new file is written at the first commit).
 
     Raises a one-line :class:`TransitionDataError` if another process writes ``path``, if ``path`` exists and is not
-    a sound transition file (see :func:`~gaitlib.transitions.schema.scan`; it is never changed then), is a version 1
-    file, or holds other gaits, library identities, latent size or settings.
+    a sound transition file (see :func:`~gaitlib.transitions.schema.scan`; it is never changed then), or holds
+    other gaits, library identities, latent size or settings.
     """
     path = Path(path)
     lock = _lock(path)
     try:
         if path.exists() or path.is_symlink():
             index, committed = schema.scan(path, keep=_COMMITTED)
-            if index.version != schema.SCHEMA_VERSION:
-                raise TransitionDataError(
-                    f"{path} is a version {index.version} transition file (not crash-safe): it is read but not "
-                    "appended to; collect into a new file and fit on both"
-                )
             schema.compare_header(index.header, header, path)
         else:
             index = schema.TransitionIndex(
