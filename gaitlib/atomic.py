@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import glob
+import hashlib
 import json
 import os
 import tempfile
@@ -15,8 +16,10 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 __all__ = [
+    "CHECKSUM_KEY",
     "atomic_path",
     "fsync_folder",
+    "json_checksum",
     "read_json",
     "release_lock",
     "save_figure",
@@ -75,8 +78,21 @@ def stale_temporaries(path: Path) -> list[Path]:
     return sorted(path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"))
 
 
-def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:
-    """Write ``payload`` as JSON to ``path`` atomically."""
+def json_checksum(payload: Mapping[str, object]) -> str:
+    """SHA-256 of ``payload`` less its ``checksum`` key, as canonical JSON (sorted keys, no spaces): what a JSON file
+    of gaitlib's carries under ``checksum``, so that a changed value (a flipped bit) is refused, not used."""
+    body = {key: value for key, value in payload.items() if key != CHECKSUM_KEY}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+CHECKSUM_KEY = "checksum"
+"""The key of a JSON object's own checksum (:func:`json_checksum`)."""
+
+
+def write_json(path: Path, payload: object, *, indent: int | None = 2, checksum: bool = False) -> Path:
+    """Write ``payload`` as JSON to ``path`` atomically; ``checksum``: with its :func:`json_checksum` added."""
+    if checksum:
+        payload = dict(payload) | {CHECKSUM_KEY: json_checksum(payload)}
     with atomic_path(path) as tmp, open(tmp, "w") as handle:
         json.dump(payload, handle, indent=indent)
         handle.write("\n")
@@ -84,8 +100,9 @@ def write_json(path: Path, payload: object, *, indent: int | None = 2) -> Path:
 
 
 def read_json(path: Path, *, header: Mapping[str, object], what: str, error: type[Exception]) -> dict:
-    """The JSON object in ``path`` (which exists) whose ``format`` and ``format_version`` are ``header``'s; raises
-    ``error`` with one line otherwise. ``what`` names the kind of file with its article (``"a gaitlib TMT"``)."""
+    """The JSON object in ``path`` (which exists) whose ``format`` and ``format_version`` are ``header``'s and whose
+    ``checksum`` matches its content; raises ``error`` with one line otherwise. ``what`` names the kind of file with
+    its article (``"a gaitlib TMT"``)."""
     try:
         payload = json.loads(Path(path).read_text())
     except (OSError, ValueError) as failure:
@@ -97,6 +114,8 @@ def read_json(path: Path, *, header: Mapping[str, object], what: str, error: typ
             f"{path} is {what} of format version {payload.get('format_version')}; "
             f"this gaitlib reads version {header['format_version']}"
         )
+    if payload.get(CHECKSUM_KEY) != json_checksum(payload):
+        raise error(f"{path} is damaged: its content does not match its checksum")
     return payload
 
 

@@ -53,9 +53,10 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48
     assert 0 < report["balanced_samples"]["latent"] <= 48
     assert sorted(p.name for p in (library / "switching").iterdir()) == [
-        "accuracy.json", "calibration.json", "net.pt", "tmt.json"
+        "accuracy.json", "calibration.json", "checksums.json", "net.pt", "tmt.json"
     ]
-    assert json.loads((library / "switching" / "accuracy.json").read_text()) == report
+    written = json.loads((library / "switching" / "accuracy.json").read_text())
+    assert written == report | {"checksum": written["checksum"]}
 
     scored = gaitlib_quick("fit", "--evaluate", "--data", data, "--library", lib, "--json")
     assert scored.returncode == 0, scored.stderr

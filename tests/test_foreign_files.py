@@ -13,7 +13,7 @@ from conftest import copy_library
 from test_benchmark import TINY
 from test_transitions import GAITS, QUICK
 
-from gaitlib.atomic import release_lock, take_lock
+from gaitlib.atomic import release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.meta import load_switching
@@ -41,8 +41,9 @@ def test_an_entry_holding_another_gaits_policy_is_refused(tmp_path) -> None:
 def test_a_nan_in_the_calibration_is_refused(switching_library, tmp_path) -> None:
     library = copy_library(Library(switching_library), tmp_path / "library")
     payload = json.loads(library.calibration_path.read_text())
-    payload["pairs"]["trot-stand"]["a"] = float("nan")
-    library.calibration_path.write_text(json.dumps(payload))
+    payload["pairs"]["trot-stand"]["a"] = float("nan")  # as a fit gone wrong would write it, checksums and all
+    write_json(library.calibration_path, payload, checksum=True)
+    library.write_checksums(library.switching_dir)
     with pytest.raises(TransitionDataError, match=r"damaged net calibration .*not a finite number"):
         get_strategy("net-lookahead", SwitchResources(library=library, gaits=("stand", "trot")))
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from conftest import copy_library
 
+from gaitlib.atomic import write_json
 from gaitlib.envs.observations import ObservationConfig
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import get_gait
@@ -49,7 +50,7 @@ def test_files_made_for_other_policies_are_refused(tiny_library) -> None:
 def test_an_entry_of_an_older_format_gets_one_line(tiny_library, tmp_path) -> None:
     library = copy_library(tiny_library, tmp_path / "library")
     meta = library.root / "stand" / "metadata.json"
-    meta.write_text(json.dumps(json.loads(meta.read_text()) | {"format_version": 1}))
+    write_json(meta, json.loads(meta.read_text()) | {"format_version": 1}, checksum=True)
     with pytest.raises(LibraryError, match="'stand' has format version 1, this gaitlib reads version 2"):
         library.entry("stand")
 
@@ -76,9 +77,10 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
     own = data(tuple(library.identities().values()))
     report = fit_library(library, own, sources=[tmp_path / "own.h5"], inputs=("phase", "latent"), epochs=1)
     written = json.loads(library.accuracy_path.read_text())
-    assert written == report.as_dict() and written["input_written"] == "phase"
+    assert written == report.as_dict() | {"checksum": written["checksum"]} and written["input_written"] == "phase"
     assert written["written"] == [
-        "switching/net.pt", "switching/tmt.json", "switching/accuracy.json", "switching/calibration.json"
+        "switching/net.pt", "switching/tmt.json", "switching/accuracy.json", "switching/calibration.json",
+        "switching/checksums.json",
     ]
     assert set(written["balanced_validation_accuracy"]) == {"phase", "latent"}
     assert written["paper_table_3"]["latent"]["trot-stand"] == pytest.approx(0.7549)  # fractions, like ours
@@ -199,7 +201,7 @@ def test_an_entry_with_damaged_action_settings_gets_one_line(tiny_library, tmp_p
     path = library.root / "trot" / "metadata.json"
     meta = json.loads(path.read_text())
     change(meta)
-    path.write_text(json.dumps(meta))
+    write_json(path, meta, checksum=True)
     with pytest.raises(LibraryError, match=r"^library entry 'trot' has damaged metadata: 'action' needs .*, got "):
         library.entry("trot")
 

@@ -12,6 +12,7 @@ import pytest
 import torch
 from cli_runner import gaitlib_quick
 
+from gaitlib.atomic import write_json
 from gaitlib.robots.a1.constants import JOINT_NAMES, MJCF_PATH
 from gaitlib.training import Library, default_library_dir
 
@@ -180,11 +181,13 @@ def test_a_damaged_tmt_is_one_line(shipped_copy, damage, why, tmp_path) -> None:
     original = path.read_text()
     tmt = json.loads(original)
     damage(tmt)
-    path.write_text(json.dumps(tmt))
+    write_json(path, tmt, indent=None, checksum=True)  # as a foreign writer would: its own checksum matches
+    shipped_copy.write_checksums(shipped_copy.switching_dir)
     try:
         result = _benchmark(shipped_copy, "tmt", tmp_path / "bench")
     finally:
         path.write_text(original)
+        shipped_copy.write_checksums(shipped_copy.switching_dir)
     assert result.returncode == 2 and result.stdout == "" and len(result.stderr.splitlines()) == 1
     assert result.stderr.startswith(f"gaitlib: error: TMT {path} is damaged ({why}")
     assert result.stderr.endswith("); run gaitlib fit\n")
@@ -197,10 +200,12 @@ def test_a_net_without_identities_is_one_line(shipped_copy, tmp_path) -> None:
     saved = torch.load(path, weights_only=True)
     del saved["metadata"]["library_identities"]
     torch.save(saved, path)
+    shipped_copy.write_checksums(shipped_copy.switching_dir)  # as a foreign writer would: the checksums agree
     try:
         result = _benchmark(shipped_copy, "net", tmp_path / "bench")
     finally:
         path.write_bytes(original)
+        shipped_copy.write_checksums(shipped_copy.switching_dir)
     _refused(result, f"transition-net {path} is damaged: no library identity for each of its gaits")
 
 

@@ -295,5 +295,5 @@ def test_lookahead_runs_in_the_meta_controller_and_refuses_an_uncalibrated_libra
     assert 0.2 - 1e-9 <= trace.switch_s <= 0.5 + 1e-9
     uncalibrated = copy_library(Library(switching_library), tmp_path / "library")
     uncalibrated.calibration_path.unlink()
-    with pytest.raises(TransitionDataError, match=r"no net calibration at .*run gaitlib fit again"):
+    with pytest.raises(TransitionDataError, match=r"calibration.json is missing or does not match its checksum"):
         get_strategy("net-lookahead", SwitchResources(library=uncalibrated, gaits=GAITS))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from gaitlib.atomic import write_json
 from gaitlib.gaits import get_gait
 from gaitlib.training import Library, LibraryError, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
@@ -158,7 +159,7 @@ def test_entry_of_another_format_version_is_refused(trained, tmp_path) -> None:
     meta_path = library / "stand" / "metadata.json"
     meta = json.loads(meta_path.read_text())
     meta["format_version"] = 99
-    meta_path.write_text(json.dumps(meta))
+    write_json(meta_path, meta, checksum=True)
     with pytest.raises(LibraryError, match="format version 99"):
         Library(library).entry("stand")
 
@@ -168,7 +169,7 @@ def test_entry_with_another_observation_layout_is_refused(trained, tmp_path) -> 
     meta_path = library / "stand" / "metadata.json"
     meta = json.loads(meta_path.read_text())
     meta["observation"]["reference_offsets"] = [1, 2, 3, 4]
-    meta_path.write_text(json.dumps(meta))
+    write_json(meta_path, meta, checksum=True)
     with pytest.raises(LibraryError, match="another observation layout"):
         Library(library).entry("stand")
 

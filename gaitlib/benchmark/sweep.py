@@ -217,7 +217,7 @@ def _sweep(out: Path, setup: SwitchingSetup, cfg: SweepConfig, pairs: list, resu
                 "elapsed_s": round(elapsed, 2),
                 "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
             }
-            write_json(out / "results.json", results, indent=1)
+            write_json(out / "results.json", results, indent=1, checksum=True)
             if progress is not None and cluster is not None:
                 progress(key, done, total)
     finally:

@@ -174,6 +174,7 @@ def read_bundle(library: Library) -> Bundle:
     :class:`~gaitlib.errors.GaitlibError` naming the file when one is missing, unreadable or from another fit."""
     import torch
 
+    library.check_switching()  # every file matches the checksum written with it
     folder = library.switching_dir
     records = {}
     for name in (Library.TMT, Library.CALIBRATION, Library.ACCURACY):

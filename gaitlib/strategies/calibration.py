@@ -110,16 +110,13 @@ def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarra
 def save_calibration(path: Path, calibration: Calibration) -> Path:
     """Write ``calibration`` as JSON, atomically."""
     g = calibration.gaits
-    return write_json(
-        path,
-        FORMAT
-        | {
-            "gaits": list(g),
-            "library_identities": calibration.identities,
-            "pairs": {f"{g[m]}-{g[n]}": {"a": a, "b": b} for (m, n), (a, b) in calibration.pairs.items()},
-            "info": calibration.info,
-        },
-    )
+    payload = FORMAT | {
+        "gaits": list(g),
+        "library_identities": calibration.identities,
+        "pairs": {f"{g[m]}-{g[n]}": {"a": a, "b": b} for (m, n), (a, b) in calibration.pairs.items()},
+        "info": calibration.info,
+    }
+    return write_json(path, payload, checksum=True)
 
 
 def load_calibration(path: Path, *, identities: dict[str, str]) -> Calibration:

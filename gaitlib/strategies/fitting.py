@@ -123,7 +123,7 @@ def fit_library(
         results=results,
         written=tuple(
             f"{Library.SWITCHING}/{name}"
-            for name in (Library.NET, Library.TMT, Library.ACCURACY, Library.CALIBRATION)
+            for name in (Library.NET, Library.TMT, Library.ACCURACY, Library.CALIBRATION, Library.CHECKSUMS)
         ),
         uncovered=tuple(pair for pair in ordered_pairs(library.gaits()) if pair not in covered),
         note=data.info.note,
@@ -132,8 +132,9 @@ def fit_library(
     with library.publish_switching() as staging:  # the four replace the library's together, or none does
         save_net(staging / Library.NET, written)
         save_table(staging / Library.TMT, build_table(data, identities=identities, source=", ".join(fitted.data)))
-        write_json(staging / Library.ACCURACY, fitted.as_dict())
+        write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
+        library.write_checksums(staging)
     return fitted
 
 

@@ -164,7 +164,7 @@ def save_table(path: Path, table: TransitionTable) -> Path:
         },
         "info": table.info,
     }
-    return write_json(path, payload, indent=None)
+    return write_json(path, payload, indent=None, checksum=True)
 
 
 def load_table(path: Path, *, identities: dict[str, str]) -> TransitionTable:

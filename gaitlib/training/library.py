@@ -36,6 +36,7 @@ from pathlib import Path
 
 import torch
 
+from gaitlib.atomic import CHECKSUM_KEY, json_checksum, read_json, write_json
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, clip_from_description
@@ -64,6 +65,10 @@ __all__ = [
 FORMAT_VERSION = 2
 """Version of the on-disk layout of a library entry; an entry of another version is refused (2: the ``deployment``
 block, and ``policy.onnx`` with a batch axis of any size)."""
+
+
+_CHECKSUMS_FORMAT = {"format": "gaitlib.switching_checksums", "format_version": 1}
+"""Header of ``switching/checksums.json``."""
 
 
 class LibraryError(GaitlibError):
@@ -143,6 +148,8 @@ class Library:
     """The fit's accuracy report (Table 3 layout), in :attr:`SWITCHING`."""
     CALIBRATION = "calibration.json"
     """The transition-net's score mapped to real success probabilities, in :attr:`SWITCHING`."""
+    CHECKSUMS = "checksums.json"
+    """The SHA-256 of each of the other files of :attr:`SWITCHING`, checked before any of them is used."""
 
     def __init__(self, root: Path | str | None = None) -> None:
         self.root = Path(root) if root is not None else default_library_dir()
@@ -173,13 +180,28 @@ class Library:
         return self.switching_dir / self.CALIBRATION
 
     def check_switching(self) -> None:
-        """Refuse, in one line with the commands that make them, a library without fitted switching models."""
+        """Refuse, in one line, a library without fitted switching models (with the commands that make them), or
+        one whose switching files do not match the checksums written with them (``checksums.json``)."""
         recover(self.switching_dir)
-        if self.switching_dir.is_dir():
-            return
-        raise TransitionDataError(
-            f"library {self.root} has no transition-net and TMT yet; make them: {' && '.join(first_fit(self.root))}"
-        )
+        if not self.switching_dir.is_dir():
+            raise TransitionDataError(
+                f"library {self.root} has no transition-net and TMT yet; make them: "
+                + " && ".join(first_fit(self.root))
+            )
+        path = self.switching_dir / self.CHECKSUMS
+        if not path.is_file():
+            raise TransitionDataError(f"{path} is missing: the switching models are unchecked; run gaitlib fit again")
+        listed = read_json(path, header=_CHECKSUMS_FORMAT, what="a gaitlib checksum list", error=TransitionDataError)
+        for name in (self.NET, self.TMT, self.ACCURACY, self.CALIBRATION):
+            file = self.switching_dir / name
+            if not file.is_file() or hashlib.sha256(file.read_bytes()).hexdigest() != listed["files"].get(name):
+                raise TransitionDataError(f"{file} is missing or does not match its checksum in {path}")
+
+    def write_checksums(self, folder: Path) -> Path:
+        """Write ``checksums.json`` into the switching folder being staged at ``folder`` (after the other files)."""
+        files = {name: hashlib.sha256((folder / name).read_bytes()).hexdigest()
+                 for name in (self.NET, self.TMT, self.ACCURACY, self.CALIBRATION)}
+        return write_json(folder / self.CHECKSUMS, _CHECKSUMS_FORMAT | {"files": files}, checksum=True)
 
     def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
         """A staging folder to write the net, TMT, accuracy report and calibration into (names :attr:`NET`,
@@ -312,7 +334,7 @@ class Library:
                     action_delay_steps=tuple(training.get("randomization", {}).get("action_delay_steps", (0, 0))),
                 ),
             }
-            (staging / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
+            write_json(staging / "metadata.json", metadata, checksum=True)
         return self.root / description.name
 
 
@@ -325,6 +347,11 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
         metadata = json.loads(meta_path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as error:
         raise LibraryError(f"library entry '{name}' has unreadable metadata: {error}") from error
+    if isinstance(metadata, dict) and metadata.get(CHECKSUM_KEY) != json_checksum(metadata):
+        raise LibraryError(
+            f"library entry '{name}' is damaged: metadata.json does not match its checksum (changed after it was "
+            "written)"
+        )
     if not isinstance(metadata, dict) or metadata.get("format_version") != FORMAT_VERSION:
         version = metadata.get("format_version") if isinstance(metadata, dict) else None
         raise LibraryError(
