@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -112,7 +113,7 @@ def load_states(path: Path) -> tuple[HandoverStates, str]:
         with np.load(path, allow_pickle=False) as npz:
             meta = json.loads(str(npz["meta"]))
             arrays = {name: npz[name] for name in ARRAYS}
-    except (OSError, ValueError, KeyError, EOFError) as error:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # the zip's CRC-32 catches flips
         raise GaitlibError(f"{path} is not a readable handover-states file ({type(error).__name__})") from None
     if not isinstance(meta, dict) or {k: meta.get(k) for k in FORMAT} != FORMAT:
         raise GaitlibError(f"{path} is not a gaitlib handover-states file of format version 1")

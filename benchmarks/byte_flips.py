@@ -1,0 +1,156 @@
+"""Fault injection: flip one random byte at a time in every kind of file gaitlib reads, read it back the way the
+commands do, and count what happened.
+
+A small library (two gaits, the tests' tiny preset), its switching models, a small transition file, a small benchmark
+result and a handover-states file are made in a temporary folder. Then, for each kind of file, ``--flips`` times: one
+byte is XOR-ed with a random non-zero value, the file is read as the commands read it, and the outcome is counted:
+
+- ``refused``: one :class:`~gaitlib.errors.GaitlibError` line (the file is named, nothing is used);
+- ``same``: accepted, and everything read equals what the pristine file gives (the flip hit bytes nothing uses);
+- ``different``: accepted with a different result: a silent wrong answer, the count that must be 0;
+- ``crashed``: another exception (a traceback instead of one line).
+
+Usage: python benchmarks/byte_flips.py [--flips 100] [--seed 0]; prints one JSON line per kind of file and exits
+non-zero if any flip was accepted with a different result or crashed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import random
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from gaitlib.benchmark.results import load_results
+from gaitlib.benchmark.sweep import SweepConfig, run_sweep
+from gaitlib.envs.handover import load_states
+from gaitlib.errors import GaitlibError
+from gaitlib.gaits import get_gait
+from gaitlib.meta import load_switching
+from gaitlib.strategies import SwitchResources
+from gaitlib.strategies.fitting import fit_library
+from gaitlib.training import Library, get_preset
+from gaitlib.training.trainer import TrainRequest, train_gait
+from gaitlib.transitions import CollectConfig, collect, read, read_all, schema
+from gaitlib.transitions.states import StatesConfig, record_states
+
+GAITS = ("stand", "trot")
+
+
+def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
+    """Make the artefacts under ``root``; kind of file -> (its path, a reader returning what the commands use)."""
+    library = root / "library"
+    for gait in GAITS:
+        train_gait(TrainRequest(description=get_gait(gait), preset=get_preset("tiny"), iterations=1, library=library,
+                                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=1, eval_seconds=0.3))
+    data = root / "t.h5"
+    collect(data, library=Library(library), config=CollectConfig(
+        samples=24, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3, push_max=400.0, backend="mujoco",
+        batch_size=24))
+    fit_library(Library(library), read(data), sources=[data], epochs=2)
+    out = root / "bench"
+    run_sweep(out, load_switching(library), SweepConfig(
+        strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, warmup_s=0.3, source_extra_s=0.2,
+        horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2, backend="mujoco", pairs=(("trot", "stand"),)))
+    states = root / "states.npz"
+    record_states(Library(library), config=StatesConfig(per_gait=4, num_worlds=2, warmup_s=0.2, spacing_s=0.1,
+                                                        backend="mujoco")).save(states)
+    probe = TensorDict({"policy": torch.linspace(-1, 1, 159).unsqueeze(0)}, batch_size=[1])
+
+    def entry() -> object:
+        loaded = Library(library).entry("stand")
+        return loaded.metadata, loaded.policy.act(probe).numpy(), (library / "stand" / "policy.onnx").read_bytes()
+
+    def switching() -> object:
+        resources = SwitchResources(library=Library(library), gaits=GAITS)
+        table, calibration, net = resources.table, resources.calibration, resources.net
+        features = torch.linspace(-1, 1, net.spec.dim).unsqueeze(0)
+        with torch.no_grad():
+            scores = net(features).numpy()
+        accuracy = json.loads((library / "switching" / "accuracy.json").read_text())
+        return dataclasses.asdict(table), calibration.pairs, calibration.identities, scores, accuracy
+
+    def transitions() -> object:
+        return read_all([data]).samples.columns(), read(data).header
+
+    part = next(schema.parts_folder(data).glob("part-*.h5"))
+    switching_dir = library / "switching"
+    return {
+        "entry metadata.json": (library / "stand" / "metadata.json", entry),
+        "entry policy.pt": (library / "stand" / "policy.pt", entry),
+        "entry policy.onnx": (library / "stand" / "policy.onnx", entry),
+        "switching net.pt": (switching_dir / "net.pt", switching),
+        "switching tmt.json": (switching_dir / "tmt.json", switching),
+        "switching calibration.json": (switching_dir / "calibration.json", switching),
+        "switching accuracy.json": (switching_dir / "accuracy.json", switching),
+        "switching checksums.json": (switching_dir / "checksums.json", switching),
+        "transition index": (data, transitions),
+        "transition part": (part, transitions),
+        "benchmark results.json": (out / "results.json", lambda: load_results(out)),
+        "handover states": (states, lambda: dataclasses.asdict(load_states(states)[0])),
+    }
+
+
+def same(a: object, b: object) -> bool:
+    """Deep equality of what the readers return (arrays compared exactly, nan equal to nan)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (np.ndarray, torch.Tensor)) or isinstance(b, (np.ndarray, torch.Tensor)):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and a.dtype == b.dtype and bool(np.array_equal(a, b, equal_nan=a.dtype.kind == "f"))
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (a != a and b != b)
+    return type(a) is type(b) and a == b
+
+
+def flip(path: Path, reader: Callable[[], object], flips: int, rng: random.Random) -> dict[str, int]:
+    """Flip ``flips`` random bytes of ``path``, one at a time, restoring it after each; count the outcomes."""
+    pristine, expected = path.read_bytes(), reader()
+    counts = {"refused": 0, "same": 0, "different": 0, "crashed": 0}
+    try:
+        for _ in range(flips):
+            damaged = bytearray(pristine)
+            damaged[rng.randrange(len(damaged))] ^= rng.randrange(1, 256)
+            path.write_bytes(bytes(damaged))
+            try:
+                got = reader()
+            except GaitlibError:
+                counts["refused"] += 1
+                continue
+            except Exception:  # a traceback instead of one line
+                counts["crashed"] += 1
+                continue
+            counts["same" if same(got, expected) else "different"] += 1
+    finally:
+        path.write_bytes(pristine)
+    assert hashlib.sha256(path.read_bytes()).digest() == hashlib.sha256(pristine).digest()
+    return counts
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--flips", type=int, default=100, help="flips per kind of file")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    rng, bad = random.Random(args.seed), 0
+    with tempfile.TemporaryDirectory() as scratch:
+        for kind, (path, reader) in build(Path(scratch)).items():
+            counts = flip(path, reader, args.flips, rng)
+            bad += counts["different"] + counts["crashed"]
+            print(json.dumps({"file": kind, "bytes": path.stat().st_size, "flips": args.flips, **counts}), flush=True)
+    sys.exit(1 if bad else 0)
+
+
+if __name__ == "__main__":
+    main()
