@@ -113,3 +113,18 @@ def test_a_truncated_or_foreign_policy_onnx_is_refused(tmp_path) -> None:
     shutil.copy(root / "trot" / "policy.onnx", onnx)  # another gait's model
     with pytest.raises(LibraryError, match=r"policy.onnx is missing or does not match"):
         Library(root).entry("stand")
+
+
+def test_a_fit_on_some_pairs_names_the_pairs_it_leaves_uncovered(switching_library, tmp_path) -> None:
+    from gaitlib.gaits import get_gait
+    from gaitlib.training import get_preset
+    from gaitlib.training.trainer import TrainRequest, train_gait
+
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    train_gait(TrainRequest(description=get_gait("pace"), preset=get_preset("tiny"), iterations=1,
+                            library=library.root, run_dir=tmp_path / "runs", backend="mujoco", eval_episodes=1,
+                            eval_seconds=0.3))
+    data = switching_library.parent / "samples.h5"  # stand and trot only
+    fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "2", "--library", str(library.root))
+    assert fitted.returncode == 0, fitted.stderr
+    assert "pairs of the library it does not cover: pace-stand, pace-trot, stand-pace, trot-pace" in fitted.stdout
