@@ -55,7 +55,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
     data = root / "t.h5"
     collect(data, library=Library(library), config=CollectConfig(
         samples=24, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3, push_max=400.0, backend="mujoco",
-        batch_size=24))
+        chunk=24))
     fit_library(Library(library), read(data), sources=[data], epochs=2)
     out = root / "bench"
     run_sweep(out, load_switching(library), SweepConfig(

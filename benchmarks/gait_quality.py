@@ -42,7 +42,7 @@ def main() -> None:
         for label, push, delay in RUNS:
             result = evaluate_policy(
                 entry.policy, entry.clip, env_cfg=env_cfg, episodes=args.episodes, seconds=args.seconds,
-                push_force=push, action_delay_steps=delay, seed=0,
+                push_max=push, action_delay_steps=delay, seed=0,
             )
             row = {"gait": name, "run": label} | result.as_dict()
             results.append(row)

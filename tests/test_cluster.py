@@ -23,7 +23,7 @@ from gaitlib.transitions import CollectConfig, collect, read, validate
 
 SMALL = CollectConfig(
     samples=40, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4, push_max=400.0, backend="mujoco",
-    batch_size=8,
+    chunk=8,
 )
 """Five chunks of eight samples on four worlds, short cycles, strong pushes (both labels)."""
 

@@ -284,8 +284,8 @@ def test_the_push_curriculum_grows_to_its_largest_push() -> None:
     preset = get_preset("cpu")
     ramp = preset.push_ramp_iterations(1500)
     assert ramp == 600  # the first 40% of a run
-    assert [preset.push_max(i, 1500) for i in (0, ramp // 2, ramp, 1499)] == pytest.approx(
-        [0.0, preset.push_force / 2, preset.push_force, preset.push_force]
+    assert [preset.push_limit(i, 1500) for i in (0, ramp // 2, ramp, 1499)] == pytest.approx(
+        [0.0, preset.push_max / 2, preset.push_max, preset.push_max]
     )
     schedule = PushSchedule(PushConfig(max_force=0.0, fixed_force=True, interval=(0.03, 0.04)), 3, 1 / 30,
                             torch.Generator().manual_seed(0))

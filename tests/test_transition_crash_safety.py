@@ -29,7 +29,7 @@ from gaitlib.transitions.writer import lock_path, open_writer
 
 FAST = CollectConfig(
     samples=4, num_worlds=4, horizon_s=0.5, warmup_s=0.1, source_extra_s=0.2, push_max=400.0, backend="mujoco",
-    batch_size=4,
+    chunk=4,
 )
 """Four worlds, one batch of four samples per commit, short cycles."""
 WRITES = [(h5py.Group, "create_dataset"), (os, "fsync"), (os, "replace")]

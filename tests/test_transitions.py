@@ -21,7 +21,7 @@ GAITS = ["stand", "trot"]
 # often enough for both labels.
 QUICK = CollectConfig(
     samples=24, num_worlds=4, horizon_s=1.5, warmup_s=0.3, source_extra_s=0.5, push_max=400.0, backend="mujoco",
-    batch_size=8,
+    chunk=8,
 )
 
 
@@ -318,7 +318,7 @@ def test_collect_reports_samples_finished_inside_the_chunk_under_way(tiny_librar
 
     monkeypatch.setattr(cycle, "REPORT_EVERY_S", 0.0)  # a report after every control step
     seen = []
-    config = dataclasses.replace(QUICK, samples=8, batch_size=8)
+    config = dataclasses.replace(QUICK, samples=8, chunk=8)
     collect(tmp_path / "t.h5", library=tiny_library, config=config, progress=seen.append)
     inside = [p.under_way for p in seen if p.samples == 0]
     assert inside and inside[0] > 0 and inside == sorted(set(inside))  # news only, before the chunk is committed

@@ -41,6 +41,10 @@ def run_command(
         bounds=PUSH_N,
     ),
     seconds: float = bounded(6.0, "--seconds", help="Length of the run;", bounds=EPISODE_SECONDS),
+    action_delay: int | None = bounded(
+        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
+        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
+    ),
     seed: int = bounded(0, "--seed", help="Random seed (randomization, pushes, strategy);", bounds=SEED),
     plot: Path = typer.Option(Path("run.png"), "--plot", help="Where to write the plot (PNG)."),
     video: Path | None = typer.Option(None, "--video", help="Also render a video of the run (MP4)."),
@@ -70,6 +74,7 @@ def run_command(
         request_s=request_at,
         push_n=push,
         seconds=seconds,
+        action_delay=action_delay,
         backend=backend,
         seed=seed,
     )

@@ -190,8 +190,10 @@ def eval_command(
     seconds: float = bounded(20.0, "--seconds", help="Episode length;", bounds=EPISODE_SECONDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
-    push: float = bounded(0.0, "--push", help="Largest random push during the episodes (0: none);", bounds=PUSH_N),
-    delay: int | None = bounded(
+    push_max: float = bounded(
+        0.0, "--push-max", help="Largest random push during the episodes (0: none);", bounds=PUSH_N
+    ),
+    action_delay: int | None = bounded(
         None, "--action-delay", help="Control steps (33 ms) every action waits (default: training's random delay);",
         bounds=DELAY_STEPS,
     ),
@@ -226,16 +228,16 @@ def eval_command(
         episodes=episodes,
         seconds=seconds,
         backend=backend,
-        push_force=push,
-        action_delay_steps=delay,
+        push_max=push_max,
+        action_delay_steps=action_delay,
         seed=seed,
     )
     if as_json:
         print(json.dumps({"gait": gait} | result.as_dict()))
         return
     print_measures(
-        f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push:g} N, action "
-        + ("delay 0-1 steps" if delay is None else f"delay {delay} step(s)"),
+        f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push_max:g} N, action "
+        + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)"),
         [
             ("fall rate", f"{result.fall_rate:.3f}"),
             ("heading lost (> 90 deg)", f"{result.heading_loss_rate:.3f}"),

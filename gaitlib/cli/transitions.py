@@ -83,7 +83,7 @@ def collect_command(
         pairs=parse_pairs(pairs, names),
         backend=backend,
         seed=seed,
-        batch_size=chunk,
+        chunk=chunk,
     )
     console = Console(stderr=True)
     with job_progress(console, "collect") as progress:

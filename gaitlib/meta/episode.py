@@ -75,19 +75,23 @@ def run_episode(
     push_n: float = 0.0,
     seconds: float = 6.0,
     deadline_s: float = DEADLINE_S,
+    action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
 ) -> RunTrace:
     """Run one robot on ``source``, request ``dest`` at ``request_s``, let ``strategy`` switch; pushes of ``push_n``
     (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit it from ``DISTURBANCE_LEAD_S`` before the
-    request until ``deadline_s`` after it (the benchmark's window). Stops at ``seconds`` or at a fall."""
+    request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits exactly
+    this many control steps (``None``: the policies' trained random delay). Stops at ``seconds`` or at a fall."""
     m, n = setup.gait_index(source), setup.gait_index(dest)
     if m == n:
         raise GaitlibError(f"--from and --to are both '{source}'")
     sim = make_backend(backend, num_worlds=1)
     try:
         pushes = PushConfig(max_force=push_n, fixed_force=True, interval=DISTURBANCE_INTERVAL_S)
-        env = setup.make_env(sim, EnvConfig(episode_seconds=seconds + 1.0, pushes=pushes), seed=seed)
+        env = setup.make_env(
+            sim, EnvConfig(episode_seconds=seconds + 1.0, pushes=pushes), seed=seed, action_delay=action_delay
+        )
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
         world = torch.zeros(1, dtype=torch.long, device=env.device)
         env.reset_worlds(world, gait=torch.tensor([m], device=env.device))

@@ -66,7 +66,7 @@ def measure_collect_throughput(
             num_worlds=worlds,
             push_max=push_max,
             backend=backend,
-            batch_size=chunk,
+            chunk=chunk,
             time_limit_s=seconds,
         )
         result = collect(Path(scratch) / "throughput.h5", library=library, config=config)

@@ -42,8 +42,8 @@ class EvalResult:
     """|forward_speed - reference_speed| / reference_speed (absolute error in m/s for a standing gait)."""
     mean_episode_seconds: float
     """Mean time alive per episode, s."""
-    push_force: float
-    """Largest push magnitude applied, N (0: no pushes)."""
+    push_max: float
+    """Largest random push, N (0: no pushes)."""
     action_delay_steps: int | None
     """Control steps every action waited (``None``: the randomized delay of training)."""
 
@@ -59,7 +59,7 @@ def evaluate_policy(
     episodes: int,
     seconds: float,
     backend: str = "auto",
-    push_force: float = 0.0,
+    push_max: float = 0.0,
     action_delay_steps: int | None = None,
     seed: int = 0,
 ) -> EvalResult:
@@ -75,7 +75,7 @@ def evaluate_policy(
     cfg = replace(
         env_cfg,
         episode_seconds=seconds,
-        pushes=PushConfig(max_force=push_force),
+        pushes=PushConfig(max_force=push_max),
         termination=replace(env_cfg.termination, heading=False),
         randomization=randomization,
     )
@@ -99,7 +99,7 @@ def evaluate_policy(
             reference_speed=mean_ref,
             speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
             mean_episode_seconds=float((counted * env.dt).mean()),
-            push_force=push_force,
+            push_max=push_max,
             action_delay_steps=action_delay_steps,
         )
     finally:

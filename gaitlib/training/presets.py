@@ -45,11 +45,11 @@ class TrainPreset:
     """Default number of iterations."""
     episode_seconds: float = 10.0
     """Training episode length before a time-out, s."""
-    push_force: float = 150.0
+    push_max: float = 150.0
     """Largest random training push at the end of the curriculum, N (direction random, 0.1-0.3 s, every 1-3 s): a
     gait that rides out 100 N needs to have met more (the benchmark pushes with up to 500 N)."""
     push_ramp: float = 0.4
-    """The push curriculum: the largest push grows linearly from 0 to :attr:`push_force` over this fraction of the
+    """The push curriculum: the largest push grows linearly from 0 to :attr:`push_max` over this fraction of the
     run's iterations (a fall-free start teaches the gait before pushes test it), then stays."""
     activation: str = "elu"
     """Hidden activation."""
@@ -58,9 +58,9 @@ class TrainPreset:
         """Iterations over which the largest push grows, in a run of ``iterations`` iterations."""
         return max(1, round(self.push_ramp * iterations))
 
-    def push_max(self, iteration: int, iterations: int) -> float:
+    def push_limit(self, iteration: int, iterations: int) -> float:
         """Largest training push during iteration ``iteration`` (0-based) of a run of ``iterations``, N."""
-        return self.push_force * min(1.0, iteration / self.push_ramp_iterations(iterations))
+        return self.push_max * min(1.0, iteration / self.push_ramp_iterations(iterations))
 
     @property
     def batch_size(self) -> int:

@@ -180,7 +180,7 @@ class GaitRunner(OnPolicyRunner):
         """One rsl-rl iteration (rollout, returns, PPO update); its statistics, also added to the curve."""
         log = self.logger
         log.clear()
-        self.env.set_push_max(self.request.preset.push_max(self.current_learning_iteration, self.request.iterations))
+        self.env.set_push_max(self.request.preset.push_limit(self.current_learning_iteration, self.request.iterations))
         with contextlib.redirect_stdout(io.StringIO()) if self.is_distributed else contextlib.nullcontext():
             super().learn(1)  # leaves current_learning_iteration at this iteration's index (and, distributed,
             # prints that it synchronizes the parameters)
@@ -315,7 +315,7 @@ def _finish(
             "wall_clock_s": round(runner.elapsed, 1),
             "seed": request.seed,
             "switch_start": switch_start,
-            "push_force_max_n": preset.push_max(runner.current_learning_iteration, request.iterations),
+            "push_max_n": preset.push_limit(runner.current_learning_iteration, request.iterations),
             "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
             "randomization": dataclasses.asdict(env_cfg.randomization),
             "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},

@@ -71,7 +71,7 @@ benchmark's judgement alike (``docs/transitions.md``, "The success horizon", say
 
 @dataclass(frozen=True, kw_only=True)
 class CollectConfig:
-    """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``batch_size``, ``device`` and
+    """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``chunk``, ``device`` and
     ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it."""
 
     samples: int
@@ -98,7 +98,7 @@ class CollectConfig:
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
     """Base seed; each run of a resumed file derives its own streams from it and the file's next chunk index."""
-    batch_size: int | None = None
+    chunk: int | None = None
     """Samples per chunk (``None``: 16 per world): the unit of work (a fresh environment of ``num_worlds`` worlds,
     every world reset, seeded from ``seed`` and the chunk index), of a commit and of a progress report. Larger
     chunks waste less to the first warm-ups and the idle worlds at the end of each (about 5% at 16 per world); a
@@ -109,8 +109,8 @@ class CollectConfig:
 
     @property
     def chunk_samples(self) -> int:
-        """Samples per chunk (``batch_size``, else 16 per world)."""
-        return self.batch_size if self.batch_size is not None else 16 * self.num_worlds
+        """Samples per chunk (:attr:`chunk`, else 16 per world)."""
+        return self.chunk if self.chunk is not None else 16 * self.num_worlds
 
 
 @dataclass(frozen=True)
@@ -300,7 +300,7 @@ def _check(cfg: CollectConfig, gaits: tuple[str, ...]) -> list[tuple[str, str]]:
     if len(gaits) < 2 or len(set(gaits)) != len(gaits):
         raise GaitlibError(f"need at least two distinct gaits to collect transitions, got {gaits}")
     if cfg.samples < 1 or cfg.num_worlds < 1 or cfg.chunk_samples < 1:
-        raise GaitlibError("samples, num_worlds and batch_size must be positive")
+        raise GaitlibError("samples, num_worlds and chunk must be positive")
     times = (cfg.horizon_s, cfg.warmup_s, cfg.source_extra_s, cfg.push_max, *cfg.push_interval_s)
     if not all(math.isfinite(t) for t in times):
         raise GaitlibError("horizon, warm-up, extra source time, push_max and push interval must be finite")
