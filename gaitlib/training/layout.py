@@ -1,0 +1,77 @@
+"""Where libraries are and the names and orders every file agrees on: the shipped and default library folders,
+the canonical gait order, ordered pairs, the commands of a first fit, and the identity check of files made for a
+library's policies. No heavy imports: everything that names a library's gaits or files uses these."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+from gaitlib.errors import TransitionDataError
+
+__all__ = [
+    "check_identities",
+    "default_library_dir",
+    "first_fit",
+    "gait_order",
+    "is_shipped",
+    "ordered_pairs",
+    "shipped_library_dir",
+]
+
+
+def shipped_library_dir() -> Path:
+    """The library that ships with gaitlib: ``library/`` of the repository, beside the package."""
+    return Path(__file__).resolve().parents[2] / "library"
+
+
+def default_library_dir() -> Path:
+    """The library commands read by default: ``$GAITLIB_LIBRARY`` if set, else the shipped one
+    (:func:`shipped_library_dir`). Training writes elsewhere by default (:mod:`gaitlib.training.target`)."""
+    if "GAITLIB_LIBRARY" in os.environ:
+        return Path(os.environ["GAITLIB_LIBRARY"])
+    return shipped_library_dir()
+
+
+def is_shipped(root: Path | str) -> bool:
+    """Whether ``root`` is the shipped library (:func:`shipped_library_dir`), under whatever path it is named."""
+    try:
+        return Path(root).resolve() == shipped_library_dir().resolve()
+    except OSError:
+        return False
+
+
+def gait_order(names: Iterable[str]) -> tuple[str, ...]:
+    """The canonical order of a set of gaits (names sorted, each once): the one order every file indexes gaits by."""
+    return tuple(sorted(set(names)))
+
+
+def ordered_pairs(gaits: Iterable[str]) -> list[str]:
+    """Every ordered pair ``"m-n"`` of ``gaits`` (sources, then destinations, in the order given)."""
+    names = list(gaits)
+    return [f"{m}-{n}" for m in names for n in names if m != n]
+
+
+def first_fit(root: Path) -> tuple[str, str]:
+    """The commands that make a library's first switching models: collect every pair, then fit."""
+    data = Path("data") / f"{Path(root).name}.h5"
+    return (
+        f"gaitlib collect --library {root} --samples 2e5 --out {data}",
+        f"gaitlib fit --library {root} --data {data}",
+    )
+
+
+def check_identities(recorded: Mapping[str, str], current: Mapping[str, str], *, what: str) -> None:
+    """Refuse, with one line naming ``what``, a file (transition data, a transition-net, a TMT) made for other
+    policies than the current ones: ``recorded`` is gait name -> identity as the file holds them, ``current`` the
+    library's. Every recorded gait must be present with the same identity
+    (:class:`~gaitlib.errors.TransitionDataError` otherwise)."""
+    for gait, identity in recorded.items():
+        if gait not in current:
+            raise TransitionDataError(f"{what} needs gait '{gait}', which the library does not hold")
+        if current[gait] != identity:
+            raise TransitionDataError(
+                f"{what} was made for another '{gait}' policy than the library's (identities differ); gaitlib "
+                "library lists the stale pairs and the commands that collect and fit them again"
+            )
