@@ -21,7 +21,7 @@ from gaitlib.gaits import GaitDescription, clip_from_description
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
 from gaitlib.training.deployment import deployment_block
-from gaitlib.training.library import shipped_library_dir
+from gaitlib.training.layout import shipped_library_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "deploy_onnx.py"

@@ -19,7 +19,8 @@ from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.meta import load_switching
 from gaitlib.strategies import SwitchResources, get_strategy
 from gaitlib.training import Library
-from gaitlib.training.library import LibraryError, shipped_library_dir
+from gaitlib.training.layout import shipped_library_dir
+from gaitlib.training.library import LibraryError
 from gaitlib.transitions import collect, schema, validate
 
 

@@ -47,7 +47,7 @@ def _menagerie_like_spec() -> mujoco.MjSpec:
         actuator.set_to_position(kp=100, kv=0)
     for joint in spec.joints:  # other joint damping, as an independently written model has
         if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
-            joint.damping = np.array([0.5] + list(np.asarray(joint.damping).ravel()[1:]))
+            joint.damping = np.array([0.5, *np.asarray(joint.damping).ravel()[1:]])
     return spec
 
 

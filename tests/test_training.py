@@ -194,7 +194,7 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
     from gaitlib.envs import EnvConfig
     from gaitlib.training import Library
     from gaitlib.training.evaluate import evaluate_policy
-    from gaitlib.training.library import shipped_library_dir
+    from gaitlib.training.layout import shipped_library_dir
 
     library = Library(shipped_library_dir())
     trot = library.entry("trot")

@@ -17,7 +17,7 @@ from cli_runner import gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.training import Library
-from gaitlib.training.library import shipped_library_dir
+from gaitlib.training.layout import shipped_library_dir
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -24,7 +24,7 @@ import torch
 from gaitlib.atomic import read_json, write_json
 from gaitlib.errors import TransitionDataError
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
-from gaitlib.training.library import check_identities
+from gaitlib.training.layout import check_identities
 from gaitlib.transitions.schema import TransitionData
 
 __all__ = [

@@ -1,12 +1,7 @@
 """Training gait policies with rsl-rl PPO, the library they are saved in, and their evaluation."""
 
-from gaitlib.training.library import (
-    Library,
-    LibraryEntry,
-    LibraryError,
-    default_library_dir,
-    gait_order,
-)
+from gaitlib.training.layout import default_library_dir, gait_order
+from gaitlib.training.library import Library, LibraryEntry, LibraryError
 from gaitlib.training.presets import TrainPreset, get_preset, preset_names
 
 __all__ = [

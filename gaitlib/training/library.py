@@ -48,9 +48,6 @@ from gaitlib.training.layout import (
     default_library_dir,
     first_fit,
     gait_order,
-    is_shipped,
-    ordered_pairs,
-    shipped_library_dir,
 )
 from gaitlib.training.policy import GaitPolicy, build_models
 from gaitlib.training.publish import recover, staged_folder
@@ -61,13 +58,6 @@ __all__ = [
     "LibraryEntry",
     "LibraryError",
     "PolicySettings",
-    "check_identities",
-    "default_library_dir",
-    "first_fit",
-    "gait_order",
-    "is_shipped",
-    "ordered_pairs",
-    "shipped_library_dir",
 ]
 
 FORMAT_VERSION = 2

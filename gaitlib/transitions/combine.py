@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.errors import TransitionDataError
-from gaitlib.training.library import gait_order
+from gaitlib.training.layout import gait_order
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader, read
 
 __all__ = ["read_all"]
