@@ -173,8 +173,9 @@ def _benchmark(library: Library, strategy: str, out) -> object:
         (lambda tmt: tmt["thresholds"].pop("tmt-value"), "missing 'tmt-value'"),
         (lambda tmt: tmt.update(successes=tmt["successes"][:1], counts=tmt["counts"][:1]), "a table of shape "),
         (lambda tmt: tmt["successes"][0].pop(), "'successes' is not a table of numbers"),
+        (lambda tmt: tmt["thresholds"]["tmt"].update({"trot-stand": float("nan")}), "a threshold or typical value"),
     ],
-    ids=["thresholds", "identities", "one-strategy", "short", "ragged"],
+    ids=["thresholds", "identities", "one-strategy", "short", "ragged", "nan"],
 )
 def test_a_damaged_tmt_is_one_line(shipped_copy, damage, why, tmp_path) -> None:
     path = shipped_copy.tmt_path

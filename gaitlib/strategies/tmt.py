@@ -208,6 +208,8 @@ def _from_payload(payload: dict) -> TransitionTable:
         return index[m], index[n]
 
     thresholds = {name: {pair(p): float(t) for p, t in payload["thresholds"][name].items()} for name in CALIBRATED}
+    if not (np.isfinite(typical_value).all() and all(np.isfinite(list(t.values())).all() for t in thresholds.values())):
+        raise ValueError("a threshold or typical value is not a finite number")
     return TransitionTable(
         gaits=gaits,
         identities=identities,
