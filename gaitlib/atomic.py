@@ -101,8 +101,8 @@ def write_json(path: Path, payload: object, *, indent: int | None = 2, checksum:
 
 def read_json(path: Path, *, header: Mapping[str, object], what: str, error: type[Exception]) -> dict:
     """The JSON object in ``path`` (which exists) whose ``format`` and ``format_version`` are ``header``'s and whose
-    ``checksum`` matches its content; raises ``error`` with one line otherwise. ``what`` names the kind of file with
-    its article (``"a gaitlib TMT"``)."""
+    ``checksum`` matches its content (returned without it); raises ``error`` with one line otherwise. ``what`` names
+    the kind of file with its article (``"a gaitlib TMT"``)."""
     try:
         payload = json.loads(Path(path).read_text())
     except (OSError, ValueError) as failure:
@@ -114,7 +114,7 @@ def read_json(path: Path, *, header: Mapping[str, object], what: str, error: typ
             f"{path} is {what} of format version {payload.get('format_version')}; "
             f"this gaitlib reads version {header['format_version']}"
         )
-    if payload.get(CHECKSUM_KEY) != json_checksum(payload):
+    if payload.pop(CHECKSUM_KEY, None) != json_checksum(payload):
         raise error(f"{path} is damaged: its content does not match its checksum")
     return payload
 
