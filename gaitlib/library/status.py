@@ -165,7 +165,7 @@ def library_status(library: Library) -> LibraryStatus:
             why = f"retrained since the fit: {', '.join(retrained)}" if retrained else "not in the fitted data"
             text = f"the switching models do not drive {len(todo)} pair(s), {', '.join(todo)} ({why})"
             problems.append(Problem(text, _refit(root, bundle, todo, usable)))
-    elif len(usable) >= 2 and not any("switching" in p.text for p in problems):
+    elif len(usable) >= 2 and not library.switching_dir.is_dir():
         problems.append(Problem("no switching models yet (transition-net, TMT)", _collect_all(root, usable)))
     return LibraryStatus(root, is_shipped(root), gaits, bundle, pairs, tuple(problems))
 
