@@ -236,7 +236,7 @@ def test_out_of_range_gait_indices_and_negative_counts_are_one_line(tmp_path) ->
     part = schema.write_part(path, batch, start=0)  # as only a foreign writer would: open_writer refuses the batch
     provenance = {"created_by": "{}", "created": "2024-01-01T00:00:00+00:00"}
     schema.write_index(path, schema.TransitionIndex(header=HEADER, parts=(part,), sessions=(), provenance=provenance,
-                                                    count=4, version=schema.SCHEMA_VERSION))
+                                                    count=4))
     message = "part part-000000000000-000000000004.h5 is damaged: 'source' holds gait index 5, the file has 2 gaits"
     with pytest.raises(TransitionDataError, match=message):
         validate(path)

@@ -95,14 +95,6 @@ class HandoverStates:
             np.savez(handle, meta=np.array(json.dumps(meta)), **{name: getattr(self, name) for name in ARRAYS})
         return Path(path)
 
-    @staticmethod
-    def concatenate(parts: list[HandoverStates]) -> HandoverStates:
-        """The states of ``parts`` (recorded in one library, with one setting) in order."""
-        first = parts[0]
-        return dataclasses.replace(
-            first, **{name: np.concatenate([getattr(p, name) for p in parts]) for name in ARRAYS}
-        )
-
 
 def load_states(path: Path) -> tuple[HandoverStates, str]:
     """The states in ``path`` and the file's SHA-256; a one-line :class:`GaitlibError` for a missing, foreign,

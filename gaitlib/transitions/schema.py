@@ -14,7 +14,8 @@ Index attributes: ``schema`` (str), ``schema_version`` (int); ``gaits`` (str lis
 ``library_identities`` (str list, same order: SHA-256 of each library entry's weights, so samples never mix
 policies); ``latent_dim`` (int); ``explicit_layout`` (JSON); ``settings`` (JSON: everything that defines how samples
 are drawn; a resumed collection must use the same); ``sessions`` (JSON list: one record per collection run that
-committed samples); ``created_by`` (JSON versions); ``created`` (UTC ISO time); ``count`` (int: committed samples).
+committed samples); ``created_by`` (JSON versions); ``created`` (UTC ISO time); ``count`` (int: committed samples);
+``index_sha256`` (SHA-256 of the other attributes as stored and of the part list, checked by every reader).
 Index dataset ``parts`` (rows in sample order): ``file`` (name in ``PATH.parts``), ``rows``, ``sha256`` (of the
 part file's bytes). Readers use the listed parts only; part files that are not listed and temporaries (left by a
 killed writer) are ignored, and removed by the next writer (:mod:`gaitlib.transitions.writer`).
@@ -104,8 +105,6 @@ class TransitionIndex:
     """``created_by`` (versions, as JSON text) and ``created`` (UTC ISO time)."""
     count: int
     """Committed samples."""
-    version: int
-    """Schema version of the file."""
 
 
 def parts_folder(path: Path) -> Path:
@@ -316,7 +315,7 @@ def _read_index(f: h5py.File, path: Path) -> TransitionIndex:
     if len(header.gaits) != len(header.identities) or not 2 <= len(header.gaits) <= 127:
         raise TransitionDataError(f"{path} is damaged: {len(header.gaits)} gaits, {len(header.identities)} identities")
     index = TransitionIndex(
-        header=header, parts=parts, sessions=sessions, provenance=provenance, count=count, version=int(version)
+        header=header, parts=parts, sessions=sessions, provenance=provenance, count=count
     )
     _check_parts(index, path)
     return index

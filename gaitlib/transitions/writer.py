@@ -151,7 +151,7 @@ def open_writer(path: Path, *, header: TransitionHeader) -> TransitionWriter:
             schema.compare_header(index.header, header, path)
         else:
             index = schema.TransitionIndex(
-                header=header, parts=(), sessions=(), provenance=_provenance(), count=0, version=schema.SCHEMA_VERSION
+                header=header, parts=(), sessions=(), provenance=_provenance(), count=0
             )
             committed = {name: np.zeros(0, dtype=COLUMNS[name].dtype) for name in _COMMITTED}
         return TransitionWriter(path, index, committed, _clean(path, index), lock)
