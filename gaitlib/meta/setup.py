@@ -11,7 +11,7 @@ import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.errors import GaitlibError, UnknownNameError
-from gaitlib.library import library_status
+from gaitlib.library import LibraryStatus, library_status
 from gaitlib.meta.controller import DEADLINE_S, MetaController
 from gaitlib.sim import SimBackend
 from gaitlib.strategies import SwitchResources, get_strategy
@@ -40,7 +40,7 @@ class SwitchingSetup:
             library = self.resources.library
             if name not in library.gaits():
                 raise UnknownNameError("gait", name, list(self.gaits))
-            fixes = [p.line() for p in library_status(library).problems if p.about == "switching"]
+            fixes = [p.line() for p in self.resources.library_status().problems if p.about == "switching"]
             raise GaitlibError(
                 f"the switching models of {library.root} drive {', '.join(self.gaits)}, not {name}"
                 + (f"; {fixes[0]}" if fixes else "")
@@ -80,19 +80,17 @@ def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
     names = lib.gaits()
     if len(names) < 2:
         raise GaitlibError(f"library {lib.root} holds {len(names)} gait(s); switching needs at least two")
-    names = _driven(lib, names)
+    status = library_status(lib) if lib.switching_dir.is_dir() else None
+    names = _driven(status, names)
     lib.shared_policy_settings(names)  # one environment drives them all: refuse mixed policy settings now
-    return SwitchingSetup(lib.entries(names), SwitchResources(library=lib, gaits=names))
+    return SwitchingSetup(lib.entries(names), SwitchResources(library=lib, gaits=names, status=status))
 
 
-def _driven(library: Library, names: tuple[str, ...]) -> tuple[str, ...]:
+def _driven(status: LibraryStatus | None, names: tuple[str, ...]) -> tuple[str, ...]:
     """The gaits switching runs with: every gait of the library, or the gaits the switching models were fitted on
     when they are fewer (a gait added since, or a fit on some gaits only) and drive every pair among them with the
     library's current policies; a pair they do not cover is then refused by name (:meth:`SwitchingSetup.gait_index`)."""
-    if not library.switching_dir.is_dir():
-        return names
-    status = library_status(library)
-    if status.bundle is None:
+    if status is None or status.bundle is None:
         return names
     fitted = tuple(g for g in names if g in status.bundle.gaits)
     return fitted if 2 <= len(fitted) < len(names) and not status.uncovered(fitted) else names

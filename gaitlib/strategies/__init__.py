@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 from gaitlib.errors import TransitionDataError
-from gaitlib.library import library_status
+from gaitlib.library import LibraryStatus, library_status
 from gaitlib.registry import Registry
 from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
 from gaitlib.strategies.calibration import Calibration, load_calibration
@@ -55,7 +55,16 @@ class SwitchResources:
     """Gaits of the environment the strategies will serve, in canonical order (indices in queries follow it)."""
     seed: int = 0
     """Seed of random choices."""
+    status: LibraryStatus | None = None
+    """What state the library is in (:func:`~gaitlib.library.library_status`), when already read; read on first
+    use otherwise (:meth:`library_status`)."""
     _cache: dict = field(default_factory=dict, repr=False)
+
+    def library_status(self) -> LibraryStatus:
+        """The library's status, read once."""
+        if self.status is None:
+            self.status = library_status(self.library)
+        return self.status
 
     @property
     def table(self) -> TransitionTable:
@@ -97,7 +106,7 @@ class SwitchResources:
         if "covered" in self._cache:
             return
         self.library.check_switching()
-        status = library_status(self.library)
+        status = self.library_status()
         if status.bundle is not None:
             missing = status.uncovered(self.gaits)
             refit = next((p for p in status.problems if p.about == "switching"), None)
