@@ -32,15 +32,16 @@ from tensordict import TensorDict
 
 from gaitlib.benchmark.results import load_results
 from gaitlib.benchmark.sweep import SweepConfig, run_sweep
+from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import get_gait
-from gaitlib.meta import load_switching
+from gaitlib.meta import TrialProtocol, load_switching
 from gaitlib.strategies import SwitchResources
 from gaitlib.strategies.fitting import fit_library
 from gaitlib.training import Library, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
-from gaitlib.transitions import CollectConfig, collect, read, read_all, schema
+from gaitlib.transitions import read, read_all, schema
 from gaitlib.transitions.states import StatesConfig, record_states
 
 GAITS = ("stand", "trot")
@@ -54,13 +55,14 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
                                 run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=1, eval_seconds=0.3))
     data = root / "t.h5"
     collect(data, library=Library(library), config=CollectConfig(
-        samples=24, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3, push_max=400.0, backend="mujoco",
-        chunk=24))
+        samples=24, num_worlds=4, push_max=400.0, backend="mujoco", chunk=24,
+        protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3)))
     fit_library(Library(library), read(data), sources=[data], epochs=2)
     out = root / "bench"
     run_sweep(out, load_switching(library), SweepConfig(
-        strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, warmup_s=0.3, source_extra_s=0.2,
-        horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2, backend="mujoco", pairs=(("trot", "stand"),)))
+        strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, backend="mujoco",
+        pairs=(("trot", "stand"),),
+        protocol=TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2)))
     states = root / "states.npz"
     record_states(Library(library), config=StatesConfig(per_gait=4, num_worlds=2, warmup_s=0.2, spacing_s=0.1,
                                                         backend="mujoco")).save(states)

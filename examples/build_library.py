@@ -12,11 +12,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gaitlib.collection import CollectConfig, collect
 from gaitlib.gaits import get_gait
 from gaitlib.strategies.fitting import fit_library
 from gaitlib.training import Library, get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
-from gaitlib.transitions import CollectConfig, collect, read_all
+from gaitlib.transitions import read_all
 
 GAITS = ("pace", "stand", "trot")  # shipped descriptions (gaitlib/gaits/descriptions/*.toml)
 

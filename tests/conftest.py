@@ -70,14 +70,17 @@ def copy_library(library: Library, folder: Path) -> Library:
 def switching_library(tiny_library, tmp_path_factory) -> Path:
     """A copy of the tiny library with a transition-net and a TMT fitted (through :func:`fit_library`) on a small
     real collection: everything the strategies and the meta-controller load."""
+    from gaitlib.collection import CollectConfig, collect
+    from gaitlib.meta import TrialProtocol
     from gaitlib.strategies.fitting import fit_library
-    from gaitlib.transitions import CollectConfig, collect, read
+    from gaitlib.transitions import read
 
     root = tmp_path_factory.mktemp("switching")
     library = copy_library(tiny_library, root / "library")
     data_path = root / "samples.h5"
     config = CollectConfig(
-        samples=32, num_worlds=8, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.5, push_max=400.0, backend="mujoco",
+        samples=32, num_worlds=8, push_max=400.0, backend="mujoco",
+        protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.5),
     )
     collect(data_path, library=library, config=config)
     fit_library(library, read(data_path), sources=[data_path], epochs=2)

@@ -20,7 +20,7 @@ from gaitlib.benchmark.report import (
 from gaitlib.benchmark.results import load_results
 from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.errors import GaitlibError
-from gaitlib.meta import load_switching
+from gaitlib.meta import TrialProtocol, load_switching
 
 TINY = SweepConfig(
     strategies=("random", "net"),
@@ -28,13 +28,14 @@ TINY = SweepConfig(
     samples=3,
     pairs=(("trot", "stand"),),
     num_worlds=4,
-    warmup_s=0.3,
-    source_extra_s=0.2,
-    horizon_s=0.5,
-    deadline_s=0.3,
-    push_lead_s=0.2,
+    protocol=TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2),
     backend="mujoco",
 )
+
+
+def _with(config: SweepConfig, **protocol) -> SweepConfig:
+    """``config`` with some of its protocol's fields changed."""
+    return dataclasses.replace(config, protocol=dataclasses.replace(config.protocol, **protocol))
 
 
 def test_wilson_interval_matches_hand_computed_values() -> None:
@@ -100,7 +101,7 @@ def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) ->
         assert cell["switched"] <= 3 and cell["forced"] <= cell["switched"]
     assert results["groups"]["random@0"]["cells"]["trot-stand"]["wait_s"] == 0.0  # random switches at once
     net = results["groups"]["net@0"]["cells"]["trot-stand"]
-    assert net["wait_s"] <= net["switched"] * (TINY.deadline_s + 1e-6)
+    assert net["wait_s"] <= net["switched"] * (TINY.protocol.deadline_s + 1e-6)
 
     again = run_sweep(out, setup, TINY, progress=lambda *a: pytest.fail("a finished sweep must not run again"))
     assert again == results
@@ -123,12 +124,12 @@ def test_pushes_come_only_inside_the_disturbance_window(tmp_path) -> None:
     setup = load_switching(None)  # the shipped library: unpushed, 99% of its pace-to-stand switches stay up
     base = dataclasses.replace(
         TINY, strategies=("random",), magnitudes=(1500.0,), pairs=(("pace", "stand"),), samples=8, num_worlds=8,
-        push_lead_s=0.0,
+        protocol=dataclasses.replace(TINY.protocol, push_lead_s=0.0),
     )
     # The quiet time before the first push (0.2-1.0 s) outlasts a 0.1 s window: no push ever lands.
-    calm = run_sweep(tmp_path / "calm", setup, dataclasses.replace(base, deadline_s=0.1))
+    calm = run_sweep(tmp_path / "calm", setup, _with(base, deadline_s=0.1))
     # A 1.2 s window always holds one, and no 12.45 kg robot rides out a push of 1,500 N.
-    pushed = run_sweep(tmp_path / "pushed", setup, dataclasses.replace(base, deadline_s=1.2, horizon_s=1.2))
+    pushed = run_sweep(tmp_path / "pushed", setup, _with(base, deadline_s=1.2, horizon_s=1.2))
     for results, successes in ((calm, range(7, 9)), (pushed, range(1))):
         cell = results["groups"]["random@1500"]["cells"]["pace-stand"]
         assert cell["successes"] in successes
@@ -137,7 +138,7 @@ def test_pushes_come_only_inside_the_disturbance_window(tmp_path) -> None:
 
 def test_a_horizon_shorter_than_the_deadline_is_refused(switching_library, tmp_path) -> None:
     with pytest.raises(GaitlibError, match="horizon must be at least the deadline"):
-        run_sweep(tmp_path, load_switching(switching_library), dataclasses.replace(TINY, horizon_s=0.2))
+        run_sweep(tmp_path, load_switching(switching_library), _with(TINY, horizon_s=0.2))
 
 
 def test_resuming_with_other_settings_is_refused(switching_library, tmp_path) -> None:

@@ -18,12 +18,13 @@ from test_transitions import GAITS, assert_same
 
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.cluster import WORKER_PREFIX, ClusterConfig
-from gaitlib.meta import load_switching
-from gaitlib.transitions import CollectConfig, collect, read, validate
+from gaitlib.collection import CollectConfig, collect
+from gaitlib.meta import TrialProtocol, load_switching
+from gaitlib.transitions import read, validate
 
 SMALL = CollectConfig(
-    samples=40, num_worlds=4, horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4, push_max=400.0, backend="mujoco",
-    chunk=8,
+    samples=40, num_worlds=4, push_max=400.0, backend="mujoco", chunk=8,
+    protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4),
 )
 """Five chunks of eight samples on four worlds, short cycles, strong pushes (both labels)."""
 

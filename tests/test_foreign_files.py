@@ -15,13 +15,14 @@ from test_transitions import GAITS, QUICK
 
 from gaitlib.atomic import release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
+from gaitlib.collection import collect
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.meta import load_switching
 from gaitlib.strategies import SwitchResources, get_strategy
 from gaitlib.training import Library
 from gaitlib.training.layout import shipped_library_dir
 from gaitlib.training.library import LibraryError
-from gaitlib.transitions import collect, schema, validate
+from gaitlib.transitions import schema, validate
 
 
 def one_line(result) -> str:

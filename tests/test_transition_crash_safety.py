@@ -22,14 +22,16 @@ import numpy as np
 import pytest
 from test_transitions import GAITS, HEADER, assert_same, make_file, synthetic
 
+from gaitlib.collection import CollectConfig, collect
 from gaitlib.errors import GaitlibError, TransitionDataError
-from gaitlib.transitions import CollectConfig, collect, read, read_all, schema, validate
+from gaitlib.meta import TrialProtocol
+from gaitlib.transitions import read, read_all, schema, validate
 from gaitlib.transitions import writer as writer_module
 from gaitlib.transitions.writer import lock_path, open_writer
 
 FAST = CollectConfig(
-    samples=4, num_worlds=4, horizon_s=0.5, warmup_s=0.1, source_extra_s=0.2, push_max=400.0, backend="mujoco",
-    chunk=4,
+    samples=4, num_worlds=4, push_max=400.0, backend="mujoco", chunk=4,
+    protocol=TrialProtocol.collection(horizon_s=0.5, warmup_s=0.1, source_extra_s=0.2),
 )
 """Four worlds, one batch of four samples per commit, short cycles."""
 WRITES = [(h5py.Group, "create_dataset"), (os, "fsync"), (os, "replace")]
@@ -151,9 +153,10 @@ def test_a_kill_inside_hdf5s_own_writes_keeps_every_committed_sample(tiny_librar
     before = read(path).samples
     script = (
         "import dataclasses, sys; from gaitlib.training import Library; "
-        "from gaitlib.transitions import collect, CollectConfig; "
+        "from gaitlib.collection import collect, CollectConfig; from gaitlib.meta import TrialProtocol; "
+        f"fields = {dataclasses.asdict(FAST)!r}; fields['protocol'] = TrialProtocol(**fields['protocol']); "
         f"collect(sys.argv[1], library=Library(sys.argv[2]), gaits={GAITS!r}, "
-        f"config=dataclasses.replace(CollectConfig(**{dataclasses.asdict(FAST)!r}), samples=12))"
+        "config=dataclasses.replace(CollectConfig(**fields), samples=12))"
     )
     command = ["strace", "-f", "-qq", "-o", "/dev/null", "-e", "trace=pwrite64",
                "-e", "inject=pwrite64:signal=SIGKILL:when=10", sys.executable, "-c", script, str(path),
@@ -250,8 +253,9 @@ def test_out_of_range_gait_indices_and_negative_counts_are_one_line(tmp_path) ->
 
 def test_nothing_is_created_for_a_refused_request(tiny_library, tmp_path) -> None:
     path = tmp_path / "out" / "t.h5"
-    for config in (dataclasses.replace(FAST, pairs=()), dataclasses.replace(FAST, horizon_s=float("nan")),
-                   dataclasses.replace(FAST, push_max=float("inf"))):
+    for config in (dataclasses.replace(FAST, pairs=()), dataclasses.replace(FAST, push_max=float("inf"))):
         with pytest.raises(GaitlibError):
             collect(path, library=tiny_library, gaits=GAITS, config=config)
+    with pytest.raises(GaitlibError, match="must be finite"):
+        TrialProtocol.collection(horizon_s=float("nan"))
     assert not path.parent.exists()

@@ -11,17 +11,20 @@ import numpy as np
 import pytest
 import torch
 
+from gaitlib.collection import CollectConfig, collect
 from gaitlib.errors import TransitionDataError
-from gaitlib.transitions import CollectConfig, collect, explicit_state, read, read_all, schema, validate
+from gaitlib.meta import TrialProtocol
+from gaitlib.transitions import explicit_state, read, read_all, schema, validate
 from gaitlib.transitions.schema import COLUMNS, TransitionBatch, TransitionHeader
 from gaitlib.transitions.writer import FAN_IN, open_writer
 
 GAITS = ["stand", "trot"]
+DT = 1 / 30  # control period, s
 # Short cycles keep the collections to a few seconds; with strong pushes (up to 400 N) the untrained policies fall
 # often enough for both labels.
 QUICK = CollectConfig(
-    samples=24, num_worlds=4, horizon_s=1.5, warmup_s=0.3, source_extra_s=0.5, push_max=400.0, backend="mujoco",
-    chunk=8,
+    samples=24, num_worlds=4, push_max=400.0, backend="mujoco", chunk=8,
+    protocol=TrialProtocol.collection(horizon_s=1.5, warmup_s=0.3, source_extra_s=0.5),
 )
 
 
@@ -215,7 +218,7 @@ def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -
     assert info.count == result.samples == 24
     assert info.header.gaits == tuple(GAITS)
     assert info.header.identities == tuple(library.identities(GAITS).values())
-    assert info.header.settings["horizon_s"] == QUICK.horizon_s and info.header.settings["backend"] == "mujoco"
+    assert info.header.settings["horizon_s"] == QUICK.protocol.horizon_s and info.header.settings["backend"] == "mujoco"
     assert info.header.settings["push_max_n"] == QUICK.push_max
     s = read(path).samples
     assert set(s.success.tolist()) == {0, 1}
@@ -224,16 +227,17 @@ def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -
     assert abs(counts[0] - counts[1]) <= QUICK.num_worlds  # pairs are filled evenly
     assert s.latent.shape == (24, 16) and s.explicit.shape == (24, 66)
     assert np.all((s.phase_source >= 0) & (s.phase_source < 1) & (s.phase_dest >= 0) & (s.phase_dest < 1))
-    assert np.all(s.switch_time >= QUICK.warmup_s - 1e-4)
+    assert np.all(s.switch_time >= QUICK.protocol.warmup_s - 1e-4)
     assert np.all((s.push_force >= 0) & (s.push_force <= QUICK.push_max + 1e-3)) and s.push_force.max() > 0
     assert np.all((s.world >= 0) & (s.world < 4))
     gravity = np.linalg.norm(s.explicit[:, 12:15], axis=1)  # newest frame's projected gravity: a unit vector
     assert np.all(np.abs(gravity - 1) < 0.1)
     assert np.all(np.isfinite(s.value_source)) and np.all(np.isfinite(s.value_dest))
-    # A success stayed up over the whole horizon; a failure fell after the switch, within the horizon, on a step.
+    # A success stayed up over the whole horizon; a failure fell after the switch, within the switch's step and the
+    # horizon, on a step.
     assert np.all(np.isinf(s.fall_after[s.success == 1]))
     falls = s.fall_after[s.success == 0]
-    assert np.all((falls > 0) & (falls <= QUICK.horizon_s + 1e-4))
+    assert np.all((falls > 0) & (falls <= QUICK.protocol.horizon_s + DT + 1e-4))
     np.testing.assert_allclose(falls * 30, np.round(falls * 30), atol=1e-3)
 
 
@@ -261,12 +265,14 @@ def test_complete_file_is_left_alone_and_other_settings_are_refused(library, int
     result = collect(path, library=library, gaits=GAITS, config=QUICK)
     assert result.written == 0 and result.samples == 24
     with pytest.raises(TransitionDataError, match="other settings"):
-        collect(path, library=library, gaits=GAITS, config=dataclasses.replace(QUICK, samples=30, horizon_s=2.0))
+        collect(path, library=library, gaits=GAITS, config=dataclasses.replace(
+            QUICK, samples=30, protocol=dataclasses.replace(QUICK.protocol, horizon_s=2.0)))
 
 
 def test_pushes_are_recorded_and_pairs_can_be_restricted(library, tmp_path) -> None:
     config = dataclasses.replace(
-        QUICK, samples=8, horizon_s=1.5, warmup_s=1.0, source_extra_s=1.0, push_max=300.0, pairs=(("trot", "stand"),)
+        QUICK, samples=8, push_max=300.0, pairs=(("trot", "stand"),),
+        protocol=TrialProtocol.collection(horizon_s=1.5, warmup_s=1.0, source_extra_s=1.0),
     )
     collect(tmp_path / "p.h5", library=library, gaits=GAITS, config=config)
     s = read(tmp_path / "p.h5").samples
@@ -314,9 +320,9 @@ def test_samples_of_a_policy_the_library_no_longer_holds_are_left_out_and_counte
 
 
 def test_collect_reports_samples_finished_inside_the_chunk_under_way(tiny_library, tmp_path, monkeypatch) -> None:
-    from gaitlib.transitions import cycle
+    from gaitlib.collection import chunks
 
-    monkeypatch.setattr(cycle, "REPORT_EVERY_S", 0.0)  # a report after every control step
+    monkeypatch.setattr(chunks, "REPORT_EVERY_S", 0.0)  # a report after every control step
     seen = []
     config = dataclasses.replace(QUICK, samples=8, chunk=8)
     collect(tmp_path / "t.h5", library=tiny_library, config=config, progress=seen.append)
@@ -331,14 +337,16 @@ def test_a_success_chains_into_the_next_sample_without_a_reset(interrupted) -> N
     s = read(path).samples
     assert validate(path).header.settings["chain"] is True
     chained = after_failure = 0
+    horizon = QUICK.protocol.horizon_s
     for chunk, world in {(int(c), int(w)) for c, w in zip(s.chunk, s.world, strict=True)}:  # each chunk starts afresh
         rows = s.select((s.chunk == chunk) & (s.world == world))
         for prev, cur in zip(range(len(rows) - 1), range(1, len(rows)), strict=True):
-            gap = rows.switch_time[cur] - rows.switch_time[prev]  # a chained switch comes a horizon + 0-1 s later
-            if rows.success[prev] and QUICK.horizon_s - 1e-3 <= gap <= QUICK.horizon_s + QUICK.source_extra_s + 1e-3:
+            # A chained switch comes the switch's step, a horizon and 0-1 s later.
+            gap = rows.switch_time[cur] - rows.switch_time[prev]
+            if rows.success[prev] and horizon - 1e-3 <= gap <= horizon + DT + QUICK.protocol.source_extra_s + 1e-3:
                 assert rows.source[cur] == rows.dest[prev]  # the destination went on and became the next source
                 chained += 1
             elif not rows.success[prev]:  # a fall resets the world: a warm-up and a source run, nothing more
-                assert rows.switch_time[cur] <= QUICK.warmup_s + QUICK.source_extra_s + 1e-4
+                assert rows.switch_time[cur] <= QUICK.protocol.warmup_s + QUICK.protocol.source_extra_s + 1e-4
                 after_failure += 1
     assert chained > 0 and after_failure > 0

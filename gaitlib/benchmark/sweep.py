@@ -1,19 +1,11 @@
 """The disturbance sweep (paper Fig. 4, top): every strategy performs every ordered pair under pushes of fixed
 magnitude, 0 to 500 N, and the success rate of each (strategy, pair, magnitude) cell is counted.
 
-One transition, per world, all worlds at once (a group = one strategy at one magnitude, its pairs interleaved):
-
-1. reset with the source gait m of the least-served pair (reference state initialization, Table 1 randomization);
-2. the meta-controller runs m for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``]; for the last
-   ``push_lead_s`` of it, pushes of the group's magnitude (random horizontal direction, ``push_duration_s``, a
-   quiet time in ``push_interval_s`` before each) hit the trunk (a fall before the request is a source fall: the
-   world starts again at 1 with the same pair, nothing is counted);
-3. the switch to n is requested; the strategy switches when it says so, or the request is forced after
-   ``deadline_s``; the pushes go on until ``deadline_s`` after the request, whatever the strategy does (the last
-   one runs out), so every strategy meets the same disturbance window and differs only in when and to which
-   phase it switches;
-4. success if the robot does not fall from the request until ``horizon_s`` after the switch (which always covers
-   the whole disturbance window).
+One group = one strategy at one magnitude, its pairs interleaved, all worlds at once: each transition is a switch
+trial of :mod:`gaitlib.meta.trials` with the ``request`` push window (pushes of the group's magnitude from
+``push_lead_s`` before the request until ``deadline_s`` after it, whatever the strategy does, so every strategy
+meets the same disturbance and differs only in when and to which phase it switches); each new trial takes the
+least-served pair; a source that falls before the request starts again with the same pair, uncounted.
 
 With a :class:`~gaitlib.benchmark.gap.DeploymentGap` the same sweep runs on another A1 model, with a fixed action
 delay or scaled motor torque (paper Fig. 4, bottom: the real robot; ``--magnitudes 0``).
@@ -43,16 +35,15 @@ from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
 from gaitlib.defaults import COMPARED
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
 from gaitlib.errors import GaitlibError
-from gaitlib.meta import DEADLINE_S, SwitchingSetup
+from gaitlib.meta import SwitchEvent, SwitchingSetup, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.robots import RobotSpec
 from gaitlib.sim import make_backend
-from gaitlib.transitions import SUCCESS_HORIZON_S
 
 __all__ = [
     "MAGNITUDE_RESOLUTION_N",
     "CellCounts",
+    "CellSchedule",
     "GroupTask",
     "GroupWorker",
     "SweepConfig",
@@ -85,20 +76,8 @@ class SweepConfig:
     """Ordered (source, destination) pairs; ``None``: every ordered pair of the library's gaits."""
     num_worlds: int = 256
     """Parallel worlds."""
-    warmup_s: float = 1.0
-    """Shortest source run after a reset before the request, s."""
-    source_extra_s: float = 1.0
-    """Further source run, uniform in [0, this], s (spreads the source phase at the request)."""
-    horizon_s: float = SUCCESS_HORIZON_S
-    """Time after the switch without a fall that makes a success, s (the collection's label horizon)."""
-    deadline_s: float = DEADLINE_S
-    """A request not acted on within this time is forced, s."""
-    push_duration_s: tuple[float, float] = (0.1, 0.3)
-    """Duration of each push, s (paper: 0.1-0.3 s)."""
-    push_interval_s: tuple[float, float] = DISTURBANCE_INTERVAL_S
-    """Quiet time before each push, s."""
-    push_lead_s: float = DISTURBANCE_LEAD_S
-    """Pushes begin this long before the request (shorter than ``warmup_s``) and end ``deadline_s`` after it, s."""
+    protocol: TrialProtocol = field(default_factory=TrialProtocol)
+    """The switch trial: times, deadline, horizon and push window (the ``request`` window, no chaining)."""
     gap: DeploymentGap = field(default_factory=DeploymentGap)
     """Another A1 model, a fixed action delay, a motor strength (default: none; it needs the ``mujoco``
     backend)."""
@@ -125,9 +104,12 @@ class SweepConfig:
                     f"push magnitudes {self.magnitudes[keys.index(key)]!r} N and {self.magnitudes[i]!r} N are one "
                     f"cell (magnitudes are resolved to {MAGNITUDE_RESOLUTION_N:g} N); give each once"
                 )
-        if not 0 <= self.push_lead_s < self.warmup_s:
+        p = self.protocol
+        if p.push_window != "request" or p.chain:
+            raise GaitlibError("the benchmark's trials push around the request and are not chained")
+        if p.push_lead_s >= p.warmup_s:
             raise GaitlibError("the push lead must lie in [0, warm-up time)")
-        if self.horizon_s < self.deadline_s:
+        if p.horizon_s < p.deadline_s:
             raise GaitlibError(
                 "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
             )
@@ -140,9 +122,12 @@ class SweepConfig:
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        for name in ("backend", "device", "gap"):
+        for name in ("backend", "device", "gap", "protocol"):
             fixed.pop(name)
-        return json.loads(json.dumps(fixed | self.gap.settings()))
+        protocol = asdict(self.protocol)
+        for name in ("push_window", "chain"):  # always the request window, never chained
+            protocol.pop(name)
+        return json.loads(json.dumps(fixed | protocol | self.gap.settings()))
 
 
 @dataclass
@@ -286,115 +271,54 @@ def _run_group(
     seed = int(np.random.SeedSequence([cfg.seed, round(magnitude * 1000)]).generate_state(1)[0])
     sim = make_backend(cfg.backend_name(), num_worlds=cfg.num_worlds, robot=robot, device=cfg.device)
     try:
-        pushes = PushConfig(
-            max_force=magnitude, fixed_force=True, duration=cfg.push_duration_s, interval=cfg.push_interval_s
-        )
+        pushes = cfg.protocol.pushes(magnitude, fixed=True)
         env = cfg.gap.make_env(setup, sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
-        controller = setup.controller(env, task.strategy, deadline_s=cfg.deadline_s, seed=seed)
-        return _Group(env, controller, pairs, setup, cfg, seed, report).run()
+        controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed)
+        cells = CellSchedule([(setup.gait_index(m), setup.gait_index(n)) for m, n in pairs], pairs, cfg.samples, report)
+        SwitchTrials(controller, cfg.protocol, cells, seed=seed).run()
+        return cells.cells
     finally:
         sim.close()
 
 
-class _Group:
-    """Per-world transition state machines (stage: 0 source run, 1 waiting for the switch, 2 after it)."""
+class CellSchedule(TrialSchedule):
+    """The sweep's schedule: ``samples`` trials of each pair, each new one of the least-started pair; counts
+    outcomes per cell."""
 
-    SOURCE, WAITING, AFTER, IDLE = 0, 1, 2, 3
+    def __init__(self, pairs: list[tuple[int, int]], names: Sequence[tuple[str, str]], samples: int,
+                 report: Callable[[int], None]) -> None:
+        self.pairs, self.names, self.samples, self.report = pairs, list(names), samples, report
+        self.cells = {pair: CellCounts() for pair in self.names}
+        self.started = [0] * len(pairs)  # trials begun (finished or under way) per pair
+        self.ended = 0
 
-    def __init__(self, env, controller, pairs, setup, cfg: SweepConfig, seed: int, report) -> None:
-        self.env, self.ctl, self.cfg, self.report = env, controller, cfg, report
-        dev, n = env.device, env.num_envs
-        self.pairs = list(pairs)
-        self.source = torch.tensor([setup.gait_index(m) for m, _ in pairs], device=dev)
-        self.dest = torch.tensor([setup.gait_index(d) for _, d in pairs], device=dev)
-        self.cells = {pair: CellCounts() for pair in pairs}
-        self.started = [0] * len(pairs)  # transitions begun (finished or under way) per pair
-        self.finished = 0
-        self.gen = torch.Generator().manual_seed(seed)
-        self.pair = torch.zeros(n, dtype=torch.long, device=dev)
-        self.stage = torch.full((n,), self.IDLE, dtype=torch.long, device=dev)
-        self.steps_left = torch.zeros(n, dtype=torch.long, device=dev)
-        self.warmup = round(cfg.warmup_s / env.dt)
-        self.extra = round(cfg.source_extra_s / env.dt)
-        self.horizon = max(1, round(cfg.horizon_s / env.dt))
-        self.lead = round(cfg.push_lead_s / env.dt)
-        self.push_steps = self.lead + round(cfg.deadline_s / env.dt)
-        self.push_left = torch.zeros(n, dtype=torch.long, device=dev)  # control steps of pushes left per world
-        self._begin(torch.arange(n, device=dev))
-
-    def run(self) -> dict[tuple[str, str], CellCounts]:
-        while bool((self.stage != self.IDLE).any()):
-            self.step()
-        return self.cells
-
-    def step(self) -> None:
-        result = self.ctl.step()
-        self.steps_left -= 1
-        self.push_left -= 1
-        for event in result.events:
-            w = event.world
-            if int(self.stage[w]) != self.WAITING:
-                continue
-            cell = self.cells[self.pairs[int(self.pair[w])]]
-            cell.switched += 1
-            cell.forced += int(event.forced)
-            cell.wait_s += event.wait_s
-            self.stage[w] = self.AFTER
-            self.steps_left[w] = self.horizon
-        fell = result.fell
-        source_fell = fell & (self.stage == self.SOURCE)
-        for w in source_fell.nonzero().squeeze(1).tolist():
-            self.cells[self.pairs[int(self.pair[w])]].source_falls += 1
-        failed = fell & ((self.stage == self.WAITING) | (self.stage == self.AFTER))
-        succeeded = ~fell & (self.stage == self.AFTER) & (self.steps_left <= 0)
-        due = ~fell & (self.stage == self.SOURCE) & (self.steps_left <= 0)
-        pushed = ~fell & (self.stage == self.SOURCE) & (self.steps_left == self.lead)
-        calmed = ~fell & (self.stage != self.SOURCE) & (self.push_left == 0)
-        for mask, ok in ((failed, False), (succeeded, True)):
-            for w in mask.nonzero().squeeze(1).tolist():
-                cell = self.cells[self.pairs[int(self.pair[w])]]
-                cell.samples += 1
-                cell.successes += int(ok)
-                self.finished += 1
-            if mask.any():
-                self.report(self.finished)
-        if source_fell.any():
-            self._start_source(source_fell.nonzero().squeeze(1))
-        ended = failed | succeeded
-        if ended.any():
-            ids = ended.nonzero().squeeze(1)
-            self.ctl.cancel(ids)
-            self._begin(ids)
-        if pushed.any():
-            self.env.enable_pushes(pushed.nonzero().squeeze(1), True)
-            self.push_left[pushed] = self.push_steps
-        if calmed.any():
-            self.env.enable_pushes(calmed.nonzero().squeeze(1), False)
-        if due.any():
-            ids = due.nonzero().squeeze(1)
-            self.ctl.request(ids, self.dest[self.pair[ids]])
-            self.stage[ids] = self.WAITING
-
-    def _begin(self, ids: torch.Tensor) -> None:
-        """Start worlds ``ids`` on the least-started pair that still needs transitions, or leave them idle."""
-        starting = []
-        for w in ids.tolist():
-            open_pairs = [i for i, s in enumerate(self.started) if s < self.cfg.samples]
+    def begin(self, k: int) -> torch.Tensor:
+        chosen = []
+        for _ in range(k):
+            open_pairs = [i for i, s in enumerate(self.started) if s < self.samples]
             if not open_pairs:
-                self.stage[w] = self.IDLE
-                self.env.enable_pushes(torch.tensor([w], device=self.env.device), False)
+                chosen.append(-1)
                 continue
-            chosen = min(open_pairs, key=lambda i: self.started[i])
-            self.started[chosen] += 1
-            self.pair[w] = chosen
-            starting.append(w)
-        if starting:
-            self._start_source(torch.tensor(starting, dtype=torch.long, device=self.env.device))
+            pair = min(open_pairs, key=lambda i: self.started[i])
+            self.started[pair] += 1
+            chosen.append(pair)
+        return torch.tensor(chosen, dtype=torch.long)
 
-    def _start_source(self, ids: torch.Tensor) -> None:
-        self.env.enable_pushes(ids, False)
-        self.env.reset_worlds(ids, gait=self.source[self.pair[ids]])
-        self.stage[ids] = self.SOURCE
-        self.push_left[ids] = -1  # armed again ``lead`` steps before the request
-        extra = torch.randint(self.extra + 1, (len(ids),), generator=self.gen).to(self.env.device)
-        self.steps_left[ids] = self.warmup + extra
+    def switched(self, pair: int, event: SwitchEvent) -> None:
+        cell = self.cells[self.names[pair]]
+        cell.switched += 1
+        cell.forced += int(event.forced)
+        cell.wait_s += event.wait_s
+
+    def source_fell(self, pairs: torch.Tensor) -> bool:
+        for pair in pairs.tolist():
+            self.cells[self.names[pair]].source_falls += 1
+        return True
+
+    def finished(self, outcome: TrialOutcome) -> None:
+        for pair, ok in zip(outcome.pair.tolist(), outcome.success.tolist(), strict=True):
+            cell = self.cells[self.names[pair]]
+            cell.samples += 1
+            cell.successes += int(ok)
+        self.ended += len(outcome.pair)
+        self.report(self.ended)

@@ -67,8 +67,9 @@ def collect_command(
 
     from gaitlib.cli.options import check_out_file, check_worlds, cluster_config, parse_pairs
     from gaitlib.cli.progress import job_progress
+    from gaitlib.collection import CollectConfig, collect
+    from gaitlib.meta import TrialProtocol
     from gaitlib.training import Library
-    from gaitlib.transitions import SUCCESS_HORIZON_S, CollectConfig, collect
 
     cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
@@ -78,7 +79,7 @@ def collect_command(
     config = CollectConfig(
         samples=int(samples),
         num_worlds=worlds,
-        horizon_s=SUCCESS_HORIZON_S if horizon is None else horizon,
+        protocol=TrialProtocol.collection(**({} if horizon is None else {"horizon_s": horizon})),
         push_max=push_max,
         pairs=parse_pairs(pairs, names),
         backend=backend,

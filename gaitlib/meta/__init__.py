@@ -1,6 +1,21 @@
-"""The meta-controller (paper Algorithm 1) and what it needs from a library to be built."""
+"""The meta-controller (paper Algorithm 1), what it needs from a library to be built, and the switch trial that
+collection, benchmark and ``gaitlib run`` share."""
 
-from gaitlib.meta.controller import DEADLINE_S, MetaController, MetaStep, SwitchEvent
+from gaitlib.meta.controller import DEADLINE_S, MetaController, MetaStep, SwitchDetail, SwitchEvent
 from gaitlib.meta.setup import SwitchingSetup, load_switching
+from gaitlib.meta.trials import SUCCESS_HORIZON_S, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 
-__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchEvent", "SwitchingSetup", "load_switching"]
+__all__ = [
+    "DEADLINE_S",
+    "SUCCESS_HORIZON_S",
+    "MetaController",
+    "MetaStep",
+    "SwitchDetail",
+    "SwitchEvent",
+    "SwitchTrials",
+    "SwitchingSetup",
+    "TrialOutcome",
+    "TrialProtocol",
+    "TrialSchedule",
+    "load_switching",
+]

@@ -8,7 +8,9 @@ policies given, in the same order.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -16,7 +18,10 @@ from gaitlib.envs import ImitationEnv
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
 from gaitlib.training.policy import GaitPolicy, per_gait
 
-__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchEvent"]
+if TYPE_CHECKING:
+    from tensordict import TensorDict
+
+__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
 
 DEADLINE_S = 2.0
 """A request not acted on within this time is forced, s."""
@@ -39,6 +44,26 @@ class SwitchEvent:
     """True when the deadline, not the strategy, made the switch."""
     wait_s: float
     """Time from the request to the switch, s."""
+
+
+@dataclass(frozen=True)
+class SwitchDetail:
+    """The k switches of one control step, as tensors, seen right after they were made (before the policies act)."""
+
+    world: torch.Tensor
+    """(k,) worlds."""
+    source: torch.Tensor
+    """(k,) gait switched from."""
+    dest: torch.Tensor
+    """(k,) gait switched to."""
+    phase_source: torch.Tensor
+    """(k,) source reference phase at the switch, cycles."""
+    phase_dest: torch.Tensor
+    """(k,) destination phase switched to, cycles."""
+    latent: torch.Tensor
+    """(k, L) the source actor's last hidden layer psi_m on the observation before the switch."""
+    observation: TensorDict
+    """(k,) rows of the environment's observations before the switch."""
 
 
 @dataclass(frozen=True)
@@ -90,6 +115,8 @@ class MetaController:
         self.waited = torch.zeros(n, dtype=torch.long, device=env.device)
         """(N,) control steps each queued request has waited."""
         self.steps = 0
+        self.on_switch: Callable[[SwitchDetail], None] | None = None
+        """Called with each step's switches right after they are made (before the policies act)."""
 
     @property
     def active(self) -> torch.Tensor:
@@ -117,13 +144,21 @@ class MetaController:
         events: list[SwitchEvent] = []
         ids = waiting.nonzero().squeeze(1)
         if len(ids):
-            decision, query = self._decide(ids)
+            decision, query, before = self._decide(ids)
             best_score[ids], best_phase[ids] = decision.score, decision.phase
             forced = self.waited[ids] >= self.deadline_steps
             go = decision.switch | forced
             if go.any():
                 chosen = ids[go]
                 env.switch(chosen, self.queued[chosen], decision.phase[go])
+                if self.on_switch is not None:
+                    self.on_switch(
+                        SwitchDetail(
+                            world=chosen, source=query.source[go], dest=query.dest[go],
+                            phase_source=query.phase_source[go], phase_dest=decision.phase[go],
+                            latent=query.latent[go], observation=before[go],
+                        )
+                    )
                 for i, world in zip(go.nonzero().squeeze(1).tolist(), chosen.tolist(), strict=True):
                     events.append(
                         SwitchEvent(
@@ -165,4 +200,4 @@ class MetaController:
             values = per_gait(self.policies, dest.repeat_interleave(c), preview, method="value")
             values = values.reshape(len(ids), c)
             query.dest_value = values / self.typical_value[dest].unsqueeze(1)
-        return self.strategy.decide(query), query
+        return self.strategy.decide(query), query, obs

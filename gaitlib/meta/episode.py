@@ -9,10 +9,11 @@ import torch
 
 from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.envs import EnvConfig, ImitationEnv
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, DISTURBANCE_LEAD_S, PushConfig
+from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
 from gaitlib.errors import GaitlibError
 from gaitlib.meta.controller import DEADLINE_S, MetaStep, SwitchEvent
 from gaitlib.meta.setup import SwitchingSetup
+from gaitlib.meta.trials import SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.sim import make_backend
 
 __all__ = ["RunTrace", "run_episode"]
@@ -79,23 +80,28 @@ def run_episode(
     backend: str = "auto",
     seed: int = 0,
 ) -> RunTrace:
-    """Run one robot on ``source``, request ``dest`` at ``request_s``, let ``strategy`` switch; pushes of ``push_n``
-    (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit it from ``DISTURBANCE_LEAD_S`` before the
-    request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits exactly
-    this many control steps (``None``: the policies' trained random delay). Stops at ``seconds`` or at a fall."""
+    """One switch trial of :mod:`gaitlib.meta.trials` on one robot: run ``source``, request ``dest`` at
+    ``request_s``, let ``strategy`` switch; pushes of ``push_n`` (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s
+    before each) hit it from ``DISTURBANCE_LEAD_S`` before the request until ``deadline_s`` after it (the
+    benchmark's window). ``action_delay``: every action waits exactly this many control steps (``None``: the
+    policies' trained random delay). Stops ``seconds - request_s`` after the switch's control step, or at a fall."""
     m, n = setup.gait_index(source), setup.gait_index(dest)
     if m == n:
         raise GaitlibError(f"--from and --to are both '{source}'")
+    if not 0 <= request_s < seconds:
+        raise GaitlibError(f"the request ({request_s:g} s) must come within the run ({seconds:g} s)")
+    protocol = TrialProtocol(
+        warmup_s=request_s, source_extra_s=0.0, horizon_s=seconds - request_s, deadline_s=deadline_s,
+        push_lead_s=min(DISTURBANCE_LEAD_S, request_s),
+    )
     sim = make_backend(backend, num_worlds=1)
     try:
-        pushes = PushConfig(max_force=push_n, fixed_force=True, interval=DISTURBANCE_INTERVAL_S)
+        pushes = protocol.pushes(push_n, fixed=True)
         env = setup.make_env(
-            sim, EnvConfig(episode_seconds=seconds + 1.0, pushes=pushes), seed=seed, action_delay=action_delay
+            sim, EnvConfig(episode_seconds=seconds + deadline_s + 1.0, pushes=pushes), seed=seed,
+            action_delay=action_delay,
         )
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
-        world = torch.zeros(1, dtype=torch.long, device=env.device)
-        env.reset_worlds(world, gait=torch.tensor([m], device=env.device))
-        env.enable_pushes(world, False)
         trace = RunTrace(
             gaits=setup.gaits,
             source=source,
@@ -107,28 +113,43 @@ def run_episode(
             push_n=push_n,
         )
         rows: dict[str, list] = {name: [] for name in _ROWS}
-        request_step = round(request_s / env.dt)
-        push_start = max(0, request_step - round(DISTURBANCE_LEAD_S / env.dt))
-        push_end = request_step + round(deadline_s / env.dt)
-        for step in range(round(seconds / env.dt)):
-            if step == push_start:
-                env.enable_pushes(world, push_n > 0)
-            if step == push_end:
-                env.enable_pushes(world, False)
-            if step == request_step:
-                ctl.request(world, n)
+        trial = _OneTrial((m, n))
+        trials = SwitchTrials(ctl, protocol, trial, seed=seed)
+        step = 0
+        while trials.running:
             active = int(env.gait[0])
-            result = ctl.step()
+            result = trials.step()
+            step += 1
             if result.events:
                 trace.switch = result.events[0]
             if bool(result.fell[0]):
-                trace.fell_s = (step + 1) * env.dt
+                trace.fell_s = step * env.dt
                 break
-            _record(rows, env, result, time_s=(step + 1) * env.dt, active=n if result.events else active)
+            _record(rows, env, result, time_s=step * env.dt, active=n if result.events else active)
         _fill(trace, rows)
         return trace
     finally:
         sim.close()
+
+
+class _OneTrial(TrialSchedule):
+    """One trial of one pair; a source fall ends it (the robot is down)."""
+
+    def __init__(self, pair: tuple[int, int]) -> None:
+        self.pairs = [pair]
+        self._begun = False
+
+    def begin(self, k: int) -> torch.Tensor:
+        pairs = torch.full((k,), -1, dtype=torch.long)
+        pairs[0] = -1 if self._begun else 0
+        self._begun = True
+        return pairs
+
+    def source_fell(self, pairs: torch.Tensor) -> bool:
+        return False
+
+    def finished(self, outcome: TrialOutcome) -> None:
+        pass  # the trace is the outcome
 
 
 def _pair_threshold(threshold: float | dict | None, pair: tuple[int, int]) -> float | None:

@@ -17,13 +17,13 @@ from pathlib import Path
 
 import torch
 
+from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
 from gaitlib.training import Library
 from gaitlib.training.policy import per_gait
-from gaitlib.transitions import CollectConfig, collect
 
 __all__ = ["CollectThroughput", "measure_collect_throughput"]
 

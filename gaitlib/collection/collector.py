@@ -1,11 +1,14 @@
 """Collect transition samples: library policies switched at random moments and phases, outcome after a horizon.
 
-A collection is a sequence of independent **chunks** (:mod:`gaitlib.transitions.cycle`): each a fresh environment
+A collection is a sequence of independent **chunks** (:mod:`gaitlib.collection.chunks`): each a fresh environment
 of ``num_worlds`` worlds seeded from ``SeedSequence([seed, chunk index])`` and a quota of samples per ordered pair
 (equal within one, the extra samples rotating over the pairs from chunk to chunk), so a chunk's samples are a pure
 function of (seed, chunk index, quota, settings, library) and chunks run here or on Ray workers
-(:mod:`gaitlib.cluster`) with the same result. Within a chunk every world loops through the same cycle, all worlds
-at once (per-world state machines held as tensors):
+(:mod:`gaitlib.cluster`) with the same result.
+
+Each sample is one switch trial of :mod:`gaitlib.meta.trials`, the protocol the benchmark judges by, made by the
+``random`` strategy (switch at once, at a uniform destination phase phi_n), with the collection's protocol
+(:meth:`TrialProtocol.collection <gaitlib.meta.TrialProtocol.collection>`):
 
 1. reset (reference state initialization, fresh Table 1 randomization) with the source gait m of an ordered pair
    (m, n): the open pair (quota not all begun) begun least so far (ties broken at random), so every pair gets its
@@ -13,23 +16,23 @@ at once (per-world state machines held as tensors):
 2. run m's policy for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``]; a fall here is counted as
    a source fall and the world starts again at 1 with the same pair (so that the pairs of the samples stay
    uniform however often a source falls);
-3. record psi_m, phi_m, the explicit state and m's critic value, switch to n at a uniform phi_n (the reference
-   re-anchored where the robot stands) and record n's critic value on the new observation;
-4. run n's policy for ``horizon_s``: alpha = 0 at the first termination, 1 if none.
-5. after a fall, back to 1. After a success the world goes on without a reset (``chain``): n, which has just run
-   for ``horizon_s``, becomes the next source, of the least-begun open pair starting from n, unless that pair is
-   more than one batch of worlds ahead of the least-begun open pair (then back to 1); the next switch comes
-   after a uniform time in [0, ``source_extra_s``]. This is how a robot runs on the meta-controller (one gait
-   after another) and it saves the warm-up of most samples.
-6. once every quota is begun, free worlds run spare cycles of the pairs not yet filled; the first samples of a
+3. at the switch, record psi_m, phi_m, the explicit state and m's critic value, switch to n at a uniform phi_n (the
+   reference re-anchored where the robot stands) and record n's critic value on the new observation;
+4. alpha = 0 at a fall within ``horizon_s`` after the end of the switch's control step, 1 if none: the benchmark's
+   verdict on the same trial;
+5. after a fall, back to 1. After a success the world goes on without a reset (``chain``): n becomes the next
+   source, of the least-begun open pair starting from n, unless that pair is more than one batch of worlds ahead
+   of the least-begun open pair (then back to 1); the next switch comes after a uniform time in
+   [0, ``source_extra_s``]. This is how a robot runs on the meta-controller (one gait after another) and it saves
+   the warm-up of most samples.
+6. once every quota is begun, free worlds run spare trials of the pairs not yet filled; the first samples of a
    pair to finish are kept, and the chunk ends when every quota is filled.
 
-At every step each world is driven by the policy of the gait it currently imitates. Episodes are made far longer
-than any cycle, so time-outs never cut a sample. With ``push_max`` > 0 random pushes (random horizontal direction,
-0.1-0.3 s, magnitude uniform in [0, ``push_max``], a quiet time in ``push_interval_s`` between them) hit the robot
-while the source runs; from the switch on no new push starts (one under way runs out), so the outcome is decided
-by the state the switch finds, which is what the transition-net sees. Each sample records the largest push
-magnitude of its source run.
+Episodes are made far longer than any trial, so time-outs never cut a sample. With ``push_max`` > 0 random pushes
+(random horizontal direction, 0.1-0.3 s, magnitude uniform in [0, ``push_max``], a quiet time in
+``push_interval_s`` between them) hit the robot while the source runs; from the switch on no new push starts (one
+under way runs out), so the outcome is decided by the state the switch finds, which is what the transition-net
+sees. Each sample records the largest push magnitude of its source run.
 
 This process alone commits the chunks, in chunk order, through :mod:`gaitlib.transitions.writer` (one writer per
 file; a kill or Ctrl-C loses the chunks under way, never a committed one); rerunning with the same output file
@@ -44,7 +47,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -52,44 +55,33 @@ import numpy as np
 import torch
 
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
+from gaitlib.collection.chunks import ChunkTask, ChunkWorker
 from gaitlib.envs import EnvConfig
 from gaitlib.envs import observations as obs_fn
-from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.meta import TrialProtocol
 from gaitlib.sim import resolve_backend_name
 from gaitlib.training.library import Library, LibraryError, PolicySettings
 from gaitlib.transitions import schema
-from gaitlib.transitions.cycle import ChunkTask, ChunkWorker
 from gaitlib.transitions.writer import open_writer
 
-__all__ = ["SUCCESS_HORIZON_S", "CollectConfig", "CollectProgress", "CollectResult", "collect"]
-
-SUCCESS_HORIZON_S = 2.5
-"""Default time after a switch within which no fall makes a success, s: the collection's label and the
-benchmark's judgement alike (``docs/transitions.md``, "The success horizon", says how it was chosen)."""
+__all__ = ["CollectConfig", "CollectProgress", "CollectResult", "collect"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class CollectConfig:
     """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``chunk``, ``device`` and
-    ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it."""
+    ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it (checked when
+    built: one-line errors)."""
 
     samples: int
     """Samples the file holds when collection ends (a resumed run continues up to this count)."""
     num_worlds: int = 64
     """Parallel worlds."""
-    horizon_s: float = SUCCESS_HORIZON_S
-    """Time after the switch within which no termination means success, s."""
-    warmup_s: float = 1.0
-    """Shortest time the source policy runs after a reset before it may be switched, s."""
-    source_extra_s: float = 1.0
-    """After the warm-up (or a chained success) the source runs a further time drawn uniformly from [0, this], s."""
-    chain: bool = True
-    """After a successful switch the destination becomes the next source without a reset (see the module doc)."""
+    protocol: TrialProtocol = field(default_factory=TrialProtocol.collection)
+    """The switch trial: warm-up, extra source time, horizon, push window and timing, chaining."""
     push_max: float = 0.0
     """Largest random push magnitude, N (uniform in [0, push_max]); 0 disables pushes."""
-    push_interval_s: tuple[float, float] = DISTURBANCE_INTERVAL_S
-    """Quiet time between pushes while the source runs, s (uniform in this range)."""
     pairs: tuple[tuple[str, str], ...] | None = None
     """Ordered (source, destination) gait pairs to sample, uniformly; ``None``: every ordered pair of ``gaits``."""
     backend: str = "auto"
@@ -195,7 +187,8 @@ def collect(
             {
                 "first_chunk": target.next_chunk,
                 "samples_at_start": target.count,
-                "chunk_seeds": f"numpy.random.SeedSequence([{cfg.seed}, chunk]).generate_state(2): env, draws",
+                "chunk_seeds": f"numpy.random.SeedSequence([{cfg.seed}, chunk]).generate_state(4): env, source "
+                "times, pair choice, destination phase",
                 "chunk_samples": cfg.chunk_samples,
                 "num_worlds": cfg.num_worlds,
                 "ray": cluster is not None,
@@ -205,7 +198,10 @@ def collect(
         )
         if cluster is not None:
             cluster = cluster.for_backend(header.settings["backend"], cfg.device)
-        worker = {"library": str(library.root), "header": header, "config": cfg}
+        worker = {
+            "library": str(library.root), "header": header, "protocol": cfg.protocol, "push_max": cfg.push_max,
+            "num_worlds": cfg.num_worlds, "seed": cfg.seed, "device": cfg.device,
+        }
         return _write_until_done(output, target, tasks, worker, counts, names, cfg, cluster, progress)
 
 
@@ -213,19 +209,23 @@ def _header(
     library: Library, gaits: tuple[str, ...], pairs: list[tuple[str, str]], cfg: CollectConfig, shared: PolicySettings
 ) -> schema.TransitionHeader:
     """What the file records of the policies and settings (a resumed run must repeat them)."""
-    pushes = PushConfig(max_force=cfg.push_max, interval=cfg.push_interval_s)
+    p = cfg.protocol
     settings = {
-        "horizon_s": cfg.horizon_s,
-        "warmup_s": cfg.warmup_s,
-        "source_extra_s": cfg.source_extra_s,
+        "horizon_s": p.horizon_s,
+        "horizon_from": "the end of the switch's control step (the benchmark's verdict)",
+        "warmup_s": p.warmup_s,
+        "source_extra_s": p.source_extra_s,
         "push_max_n": cfg.push_max,
-        "push_duration_s": list(pushes.duration),
-        "push_interval_s": list(pushes.interval),
-        "pushes_during": "source run only (none starts after the switch); push_force: largest of the source run",
+        "push_duration_s": list(p.push_duration_s),
+        "push_interval_s": list(p.push_interval_s),
+        "pushes_during": "source run only (none starts after the switch); push_force: largest of the source run"
+        if p.push_window == "source"
+        else f"from {p.push_lead_s:g} s before the request to {p.deadline_s:g} s after it; push_force: largest of "
+        "the source run",
         "pairs": [list(p) for p in pairs],
         "pair_choice": "per chunk a quota per ordered pair (equal within one, the extra rotating over chunks); "
         "least-begun open pair at each reset, ties at random; phase_dest uniform in [0, 1)",
-        "chain": cfg.chain,
+        "chain": p.chain,
         "backend": resolve_backend_name(cfg.backend),
         "seed": cfg.seed,
         "randomization": dataclasses.asdict(shared.env_config(EnvConfig()).randomization),
@@ -301,11 +301,8 @@ def _check(cfg: CollectConfig, gaits: tuple[str, ...]) -> list[tuple[str, str]]:
         raise GaitlibError(f"need at least two distinct gaits to collect transitions, got {gaits}")
     if cfg.samples < 1 or cfg.num_worlds < 1 or cfg.chunk_samples < 1:
         raise GaitlibError("samples, num_worlds and chunk must be positive")
-    times = (cfg.horizon_s, cfg.warmup_s, cfg.source_extra_s, cfg.push_max, *cfg.push_interval_s)
-    if not all(math.isfinite(t) for t in times):
-        raise GaitlibError("horizon, warm-up, extra source time, push_max and push interval must be finite")
-    if cfg.horizon_s <= 0 or cfg.warmup_s < 0 or cfg.source_extra_s < 0 or cfg.push_max < 0:
-        raise GaitlibError("horizon must be positive; warm-up, extra source time and push_max not negative")
+    if not (math.isfinite(cfg.push_max) and cfg.push_max >= 0):
+        raise GaitlibError("push_max must be finite and not negative")
     if cfg.pairs is None:
         return list(itertools.permutations(gaits, 2))
     pairs = [tuple(p) for p in cfg.pairs]
