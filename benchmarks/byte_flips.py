@@ -36,10 +36,11 @@ from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import get_gait
+from gaitlib.library import Library
 from gaitlib.meta import TrialProtocol, load_switching
 from gaitlib.strategies import SwitchResources
 from gaitlib.strategies.fitting import fit_library
-from gaitlib.training import Library, get_preset
+from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions import read, read_all, schema
 from gaitlib.transitions.states import StatesConfig, record_states

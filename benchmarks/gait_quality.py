@@ -17,7 +17,7 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.envs import EnvConfig
-from gaitlib.training import Library
+from gaitlib.library import Library
 from gaitlib.training.evaluate import evaluate_policy
 
 RUNS = (("no pushes", 0.0, None), ("push <= 50 N", 50.0, None), ("push <= 100 N", 100.0, None),

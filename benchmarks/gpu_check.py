@@ -270,8 +270,8 @@ def measure_train(sizes: CheckSizes) -> dict[str, object]:
 def measure_collect(sizes: CheckSizes) -> dict[str, object]:
     """``gaitlib throughput collect``: samples/s of a collection (into a temporary file) from the shipped library,
     against what a plain policy rollout allows."""
+    from gaitlib.library import Library
     from gaitlib.throughput.collect import measure_collect_throughput
-    from gaitlib.training import Library
 
     result = measure_collect_throughput(
         Library(None),

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gaitlib.training import Library
+from gaitlib.library import Library
 
 
 def main() -> None:

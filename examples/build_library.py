@@ -14,8 +14,9 @@ from pathlib import Path
 
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.gaits import get_gait
+from gaitlib.library import Library
 from gaitlib.strategies.fitting import fit_library
-from gaitlib.training import Library, get_preset
+from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions import read_all
 

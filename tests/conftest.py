@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from gaitlib.library import Library
 from gaitlib.sim import make_backend
-from gaitlib.training import Library
 
 TINY_GAITS = ("stand", "trot")
 """The gaits of :func:`tiny_library`."""

@@ -10,8 +10,8 @@ from cli_runner import gaitlib, gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.cli.options import parse_pairs
+from gaitlib.library import Library
 from gaitlib.strategies.fitting import evaluate_library
-from gaitlib.training import Library
 from gaitlib.transitions import read_all, validate
 
 QUICK = ["--worlds", "4", "--horizon", "1.5", "--push-max", "400", "--backend", "mujoco"]

@@ -18,10 +18,10 @@ from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.randomization import RandomizationConfig, sample_world_parameters
 from gaitlib.gaits import GaitDescription, clip_from_description
+from gaitlib.library.deployment import deployment_block
+from gaitlib.library.layout import shipped_library_dir
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
-from gaitlib.training.deployment import deployment_block
-from gaitlib.training.layout import shipped_library_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "deploy_onnx.py"

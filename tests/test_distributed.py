@@ -9,7 +9,7 @@ import sys
 
 import torch
 
-from gaitlib.training import Library
+from gaitlib.library import Library
 
 TRAIN = ("train", "stand", "--preset", "tiny", "--backend", "mujoco", "--seed", "5", "--eval-episodes", "2")
 

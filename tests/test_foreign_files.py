@@ -17,11 +17,11 @@ from gaitlib.atomic import release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.collection import collect
 from gaitlib.errors import GaitlibError, TransitionDataError
+from gaitlib.library import Library
+from gaitlib.library.layout import shipped_library_dir
+from gaitlib.library.store import LibraryError
 from gaitlib.meta import load_switching
 from gaitlib.strategies import SwitchResources, get_strategy
-from gaitlib.training import Library
-from gaitlib.training.layout import shipped_library_dir
-from gaitlib.training.library import LibraryError
 from gaitlib.transitions import schema, validate
 
 

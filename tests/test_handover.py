@@ -14,9 +14,9 @@ from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates, load_states
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import clip_from_description, get_gait
+from gaitlib.library.policy import per_gait
 from gaitlib.sim import make_backend
 from gaitlib.training import get_preset
-from gaitlib.training.policy import per_gait
 from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions.states import StatesConfig, record_states
 

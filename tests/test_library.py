@@ -17,9 +17,9 @@ from gaitlib.atomic import write_json
 from gaitlib.envs.observations import ObservationConfig
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import get_gait
+from gaitlib.library import Library, LibraryError, publish
+from gaitlib.library.policy import build_models
 from gaitlib.strategies.fitting import fit_library
-from gaitlib.training import Library, LibraryError, publish
-from gaitlib.training.policy import build_models
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 
 
@@ -94,7 +94,8 @@ from pathlib import Path
 
 import torch
 
-from gaitlib.training import Library, publish
+from gaitlib.library import Library
+from gaitlib.library import publish
 from gaitlib.transitions import read
 
 root, where = Path(sys.argv[1]), sys.argv[2]

@@ -9,8 +9,8 @@ from cli_runner import gaitlib_quick
 
 from gaitlib.benchmark.push_curve import SECTORS, single_push_curve
 from gaitlib.envs import EnvConfig
-from gaitlib.training import Library
-from gaitlib.training.layout import shipped_library_dir
+from gaitlib.library import Library
+from gaitlib.library.layout import shipped_library_dir
 
 
 def test_a_harder_push_fells_more_and_every_direction_is_hit() -> None:

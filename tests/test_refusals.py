@@ -13,8 +13,8 @@ import torch
 from cli_runner import gaitlib_quick
 
 from gaitlib.atomic import write_json
+from gaitlib.library import Library, default_library_dir
 from gaitlib.robots.a1.constants import JOINT_NAMES, MJCF_PATH
-from gaitlib.training import Library, default_library_dir
 
 
 def _refused(result, line: str) -> None:

@@ -11,6 +11,7 @@ import torch
 from conftest import copy_library
 
 from gaitlib.errors import TransitionDataError, UnknownNameError
+from gaitlib.library import Library
 from gaitlib.meta.episode import run_episode
 from gaitlib.meta.setup import load_switching
 from gaitlib.strategies import (
@@ -32,7 +33,6 @@ from gaitlib.strategies.net import NetStrategy
 from gaitlib.strategies.random_switch import RandomStrategy
 from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, best_threshold
 from gaitlib.strategies.value import ValueStrategy
-from gaitlib.training import Library
 from gaitlib.transition_net import FeatureSpec, TransitionNet
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 

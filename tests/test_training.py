@@ -10,7 +10,8 @@ import torch
 
 from gaitlib.atomic import write_json
 from gaitlib.gaits import get_gait
-from gaitlib.training import Library, LibraryError, get_preset
+from gaitlib.library import Library, LibraryError
+from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 
 
@@ -192,9 +193,9 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
     """The trot's reference runs at a constant 1.45 m/s: over 30 steps the mean is that, not 29/30 of it (the step
     that ends an episode counts for its length, not for the means)."""
     from gaitlib.envs import EnvConfig
-    from gaitlib.training import Library
+    from gaitlib.library import Library
+    from gaitlib.library.layout import shipped_library_dir
     from gaitlib.training.evaluate import evaluate_policy
-    from gaitlib.training.layout import shipped_library_dir
 
     library = Library(shipped_library_dir())
     trot = library.entry("trot")

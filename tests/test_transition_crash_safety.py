@@ -152,7 +152,7 @@ def test_a_kill_inside_hdf5s_own_writes_keeps_every_committed_sample(tiny_librar
     collect(path, library=tiny_library, gaits=GAITS, config=FAST)
     before = read(path).samples
     script = (
-        "import dataclasses, sys; from gaitlib.training import Library; "
+        "import dataclasses, sys; from gaitlib.library import Library; "
         "from gaitlib.collection import collect, CollectConfig; from gaitlib.meta import TrialProtocol; "
         f"fields = {dataclasses.asdict(FAST)!r}; fields['protocol'] = TrialProtocol(**fields['protocol']); "
         f"collect(sys.argv[1], library=Library(sys.argv[2]), gaits={GAITS!r}, "

@@ -16,8 +16,8 @@ import pytest
 from cli_runner import gaitlib_quick
 from conftest import copy_library
 
-from gaitlib.training import Library
-from gaitlib.training.layout import shipped_library_dir
+from gaitlib.library import Library
+from gaitlib.library.layout import shipped_library_dir
 
 REPO = Path(__file__).resolve().parents[1]
 

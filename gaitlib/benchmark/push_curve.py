@@ -22,9 +22,9 @@ from gaitlib.benchmark.report import wilson_interval
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.gaits import ReferenceClip
+from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
-from gaitlib.training.policy import GaitPolicy
 
 __all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "single_push_curve", "write_push_plot"]
 

@@ -21,8 +21,7 @@ def library_command(
 
     from gaitlib.cli.tables import table_console
     from gaitlib.errors import GaitlibError
-    from gaitlib.library import library_status
-    from gaitlib.training import Library
+    from gaitlib.library import Library, library_status
 
     lib = Library(library)
     if not lib.root.is_dir():

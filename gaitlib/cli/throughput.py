@@ -72,8 +72,8 @@ def collect_throughput(
 ) -> None:
     """Samples per second of gaitlib collect against what the environment step allows (goal: ratio >= 0.8)."""
     from gaitlib.cli.options import check_worlds
+    from gaitlib.library import Library
     from gaitlib.throughput.collect import measure_collect_throughput
-    from gaitlib.training import Library
 
     check_worlds("--worlds", worlds, backend=backend)
     result = measure_collect_throughput(

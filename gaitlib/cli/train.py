@@ -175,8 +175,7 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
 
 def _say_status(console, library: Path, gait: str) -> None:
     """What the library a gait was just written into needs before it switches, and how to use it."""
-    from gaitlib.library import library_status
-    from gaitlib.training import Library
+    from gaitlib.library import Library, library_status
 
     status = library_status(Library(library))
     for problem in status.problems:
@@ -210,7 +209,7 @@ def eval_command(
     --impulses, its fall rate against a single push's impulse."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
     from gaitlib.envs import EnvConfig
-    from gaitlib.training import Library
+    from gaitlib.library import Library
     from gaitlib.training.evaluate import evaluate_policy
 
     check_worlds("--episodes", episodes, backend=backend)

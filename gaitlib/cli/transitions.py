@@ -68,8 +68,8 @@ def collect_command(
     from gaitlib.cli.options import check_out_file, check_worlds, cluster_config, parse_pairs
     from gaitlib.cli.progress import job_progress
     from gaitlib.collection import CollectConfig, collect
+    from gaitlib.library import Library
     from gaitlib.meta import TrialProtocol
-    from gaitlib.training import Library
 
     cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
@@ -132,7 +132,7 @@ def states_command(
 
     from gaitlib.cli.options import check_worlds
     from gaitlib.cli.progress import job_progress
-    from gaitlib.training import Library
+    from gaitlib.library import Library
     from gaitlib.transitions.states import StatesConfig, record_states
 
     check_worlds("--worlds", worlds, backend=backend)
@@ -173,8 +173,8 @@ def fit_command(
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library."""
+    from gaitlib.library import Library
     from gaitlib.strategies.fitting import evaluate_library, fit_library
-    from gaitlib.training import Library
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 

@@ -17,9 +17,9 @@ import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.errors import GaitlibError
+from gaitlib.library.policy import per_gait
 from gaitlib.meta import MetaController, SwitchDetail, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.strategies.random_switch import RandomStrategy
-from gaitlib.training.policy import per_gait
 from gaitlib.transitions import schema
 from gaitlib.transitions.explicit import EXPLICIT_DIM, explicit_state
 
@@ -81,8 +81,8 @@ class ChunkWorker:
         device: str | None = None,
         report: Callable[[int], None] | None = None,
     ) -> None:
+        from gaitlib.library.store import Library
         from gaitlib.sim import make_backend
-        from gaitlib.training.library import Library
 
         lib, gaits = Library(library), header.gaits
         if tuple(lib.identities(gaits).values()) != header.identities:

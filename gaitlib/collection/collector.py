@@ -59,9 +59,9 @@ from gaitlib.collection.chunks import ChunkTask, ChunkWorker
 from gaitlib.envs import EnvConfig
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
+from gaitlib.library.store import Library, LibraryError, PolicySettings
 from gaitlib.meta import TrialProtocol
 from gaitlib.sim import resolve_backend_name
-from gaitlib.training.library import Library, LibraryError, PolicySettings
 from gaitlib.transitions import schema
 from gaitlib.transitions.writer import open_writer
 

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.errors import GaitlibError
-from gaitlib.training.layout import first_fit, is_shipped, ordered_pairs
-from gaitlib.training.library import Library
+from gaitlib.library.layout import first_fit, is_shipped, ordered_pairs
+from gaitlib.library.store import Library
 
 __all__ = ["Bundle", "GaitStatus", "LibraryStatus", "Problem", "library_status", "read_bundle"]
 

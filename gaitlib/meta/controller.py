@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 import torch
 
 from gaitlib.envs import ImitationEnv
+from gaitlib.library.policy import GaitPolicy, per_gait
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
-from gaitlib.training.policy import GaitPolicy, per_gait
 
 if TYPE_CHECKING:
     from tensordict import TensorDict

@@ -12,10 +12,10 @@ import torch
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.errors import GaitlibError, UnknownNameError
 from gaitlib.library import LibraryStatus, library_status
+from gaitlib.library.store import Library, LibraryEntry
 from gaitlib.meta.controller import DEADLINE_S, MetaController
 from gaitlib.sim import SimBackend
 from gaitlib.strategies import SwitchResources, get_strategy
-from gaitlib.training.library import Library, LibraryEntry
 
 __all__ = ["SwitchingSetup", "load_switching"]
 

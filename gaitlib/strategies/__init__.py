@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 from gaitlib.errors import TransitionDataError
 from gaitlib.library import LibraryStatus, library_status
+from gaitlib.library.store import Library
 from gaitlib.registry import Registry
 from gaitlib.strategies.base import PHASE_GRID, Decision, Strategy, SwitchQuery, phase_grid
 from gaitlib.strategies.calibration import Calibration, load_calibration
@@ -22,7 +23,6 @@ from gaitlib.strategies.net import NET_THRESHOLD, NetStrategy
 from gaitlib.strategies.random_switch import RandomStrategy
 from gaitlib.strategies.tmt import TMTStrategy, TMTValueStrategy, TransitionTable, build_table, load_table, save_table
 from gaitlib.strategies.value import ValueStrategy
-from gaitlib.training.library import Library
 
 __all__ = [
     "COMPARED",

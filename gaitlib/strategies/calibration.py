@@ -22,7 +22,7 @@ import torch
 
 from gaitlib.atomic import read_json, write_json
 from gaitlib.errors import TransitionDataError
-from gaitlib.training.layout import check_identities
+from gaitlib.library.layout import check_identities
 from gaitlib.transition_net import TransitionNet, batch_features
 from gaitlib.transitions import TransitionData
 

@@ -17,10 +17,10 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.errors import UnknownNameError
+from gaitlib.library.layout import ordered_pairs
+from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import calibrate, save_calibration
 from gaitlib.strategies.tmt import build_table, save_table
-from gaitlib.training.layout import ordered_pairs
-from gaitlib.training.library import Library
 from gaitlib.transition_net import INPUT_KINDS, EpochStats, FitConfig, FitResult, evaluate_net, fit, load_net, save_net
 from gaitlib.transitions import TransitionData
 

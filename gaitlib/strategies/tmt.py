@@ -23,8 +23,8 @@ import torch
 
 from gaitlib.atomic import read_json, write_json
 from gaitlib.errors import TransitionDataError
+from gaitlib.library.layout import check_identities
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
-from gaitlib.training.layout import check_identities
 from gaitlib.transitions.schema import TransitionData
 
 __all__ = [

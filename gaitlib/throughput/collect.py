@@ -20,10 +20,10 @@ import torch
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
+from gaitlib.library import Library
+from gaitlib.library.policy import per_gait
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
-from gaitlib.training import Library
-from gaitlib.training.policy import per_gait
 
 __all__ = ["CollectThroughput", "measure_collect_throughput"]
 

@@ -9,9 +9,9 @@ import torch
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.gaits import ReferenceClip
+from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import make_backend
-from gaitlib.training.policy import GaitPolicy
 
 __all__ = ["EvalResult", "evaluate_policy"]
 

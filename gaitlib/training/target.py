@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.errors import GaitlibError
-from gaitlib.training.layout import is_shipped, ordered_pairs, shipped_library_dir
-from gaitlib.training.library import Library
-from gaitlib.training.publish import staged_folder
+from gaitlib.library.layout import is_shipped, ordered_pairs, shipped_library_dir
+from gaitlib.library.publish import staged_folder
+from gaitlib.library.store import Library
 
 __all__ = ["TEST_PRESET", "USER_LIBRARY", "TrainTarget", "check_target", "copy_library", "training_target"]
 

@@ -25,12 +25,12 @@ from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
+from gaitlib.library.policy import GaitPolicy
+from gaitlib.library.store import Library
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_in_sync, rank_device
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
-from gaitlib.training.library import Library
-from gaitlib.training.policy import GaitPolicy
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
 from gaitlib.training.switch_start import handover_states
 from gaitlib.training.target import check_target, copy_library

@@ -20,7 +20,7 @@ import torch
 
 from gaitlib.atomic import atomic_path
 from gaitlib.errors import TransitionDataError
-from gaitlib.training.layout import check_identities
+from gaitlib.library.layout import check_identities
 from gaitlib.transition_net.features import FeatureSpec
 from gaitlib.transition_net.fit import FitResult
 from gaitlib.transition_net.model import TransitionNet

@@ -2,7 +2,7 @@
 data together.
 
 Files may hold different gaits (a collection made after a gait was added holds the new pairs); gait indices are
-remapped onto the canonical order of the union of their gaits (:func:`~gaitlib.training.library.gait_order`), the
+remapped onto the canonical order of the union of their gaits (:func:`~gaitlib.library.store.gait_order`), the
 order the transition-net and the TMT index gaits by, whatever order a file was written in. Files must agree on the
 latent size, and on every gait they share (same library identity: the same policy), unless the library's current
 identities are given: then the samples of a pair whose source or destination policy is not the library's current
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.errors import TransitionDataError
-from gaitlib.training.layout import gait_order
+from gaitlib.library.layout import gait_order
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader, read
 
 __all__ = ["read_all"]

@@ -16,9 +16,9 @@ from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import ARRAYS, HandoverStates
 from gaitlib.envs.randomization import DISTURBANCE_INTERVAL_S, PushConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.library.policy import per_gait
+from gaitlib.library.store import Library
 from gaitlib.sim import make_backend, resolve_backend_name
-from gaitlib.training.library import Library
-from gaitlib.training.policy import per_gait
 
 __all__ = ["StatesConfig", "record_states"]
 

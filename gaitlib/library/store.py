@@ -8,7 +8,7 @@ A library folder holds one entry per gait and the switching models fitted on its
     <library>/switching/accuracy.json                        how well the net and its input ablation did
     <library>/switching/calibration.json                     the net's score mapped to real success rates
 
-Each entry and the ``switching`` folder are published whole (:mod:`gaitlib.training.publish`): a reader, or a
+Each entry and the ``switching`` folder are published whole (:mod:`gaitlib.library.publish`): a reader, or a
 writer killed at any moment, finds the old version or the new one, never neither and never a mix (a net beside
 the TMT of another fit, say).
 
@@ -39,18 +39,18 @@ from gaitlib.atomic import CHECKSUM_KEY, json_checksum, read_json, write_json
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, clip_from_description
-from gaitlib.robots import get_robot
-from gaitlib.training.deployment import deployment_block
-from gaitlib.training.entry import LibraryEntry, PolicySettings
-from gaitlib.training.export import export_onnx
-from gaitlib.training.layout import (
+from gaitlib.library.deployment import deployment_block
+from gaitlib.library.entry import LibraryEntry, PolicySettings
+from gaitlib.library.export import export_onnx
+from gaitlib.library.layout import (
     check_identities,
     default_library_dir,
     first_fit,
     gait_order,
 )
-from gaitlib.training.policy import GaitPolicy, build_models
-from gaitlib.training.publish import recover, staged_folder
+from gaitlib.library.policy import GaitPolicy, build_models
+from gaitlib.library.publish import recover, staged_folder
+from gaitlib.robots import get_robot
 
 __all__ = [
     "FORMAT_VERSION",
@@ -153,7 +153,7 @@ class Library:
 
     def gaits(self) -> tuple[str, ...]:
         """Gaits that have an entry, in canonical order (an entry a killed writer left half-replaced is put back
-        first: see :mod:`gaitlib.training.publish`)."""
+        first: see :mod:`gaitlib.library.publish`)."""
         if not self.root.is_dir():
             return ()
         for old in self.root.glob(".*.old"):

@@ -1,5 +1,5 @@
 """A loaded library entry (:class:`LibraryEntry`) and what the entries that drive one environment share
-(:class:`PolicySettings`); :class:`~gaitlib.training.library.Library` loads and checks them."""
+(:class:`PolicySettings`); :class:`~gaitlib.library.store.Library` loads and checks them."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from gaitlib.envs import EnvConfig
 from gaitlib.envs import observations as obs_fn
 from gaitlib.gaits import GaitDescription, ReferenceClip
-from gaitlib.training.policy import GaitPolicy
+from gaitlib.library.policy import GaitPolicy
 
 __all__ = ["LibraryEntry", "PolicySettings"]
 
