@@ -47,10 +47,10 @@ class RunTrace:
     """(T,) trunk height, m."""
     push: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) magnitude of the push on the trunk during each step, N."""
-    foot_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=bool))
-    """(T, 4) foot contacts (FR, FL, RR, RL)."""
-    qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 19)))
-    """(T, 19) generalized positions (trunk position, quaternion w-x-y-z, 12 joints) for rendering."""
+    foot_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    """(T, feet) foot contacts, in the robot's foot order (the A1's FR, FL, RR, RL)."""
+    qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    """(T, 7 + joints) generalized positions (trunk position, quaternion w-x-y-z, joints) for rendering."""
     switch: SwitchEvent | None = None
     """The switch, if one happened."""
     fell_s: float | None = None
@@ -126,7 +126,7 @@ def run_episode(
                 trace.fell_s = step * env.dt
                 break
             _record(rows, env, result, time_s=step * env.dt, active=n if result.events else active)
-        _fill(trace, rows)
+        _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
         return trace
     finally:
         sim.close()
@@ -174,10 +174,10 @@ def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_
     rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
 
 
-def _fill(trace: RunTrace, rows: dict[str, list]) -> None:
+def _fill(trace: RunTrace, rows: dict[str, list], *, legs: int, qpos_size: int) -> None:
     """Give ``trace`` the recorded steps as arrays."""
     for name, values in rows.items():
         setattr(trace, name, np.asarray(values))
     trace.active = trace.active.astype(np.int64)
-    trace.foot_contact = trace.foot_contact.astype(bool).reshape(-1, 4)
-    trace.qpos = trace.qpos.reshape(len(rows["qpos"]), -1)
+    trace.foot_contact = trace.foot_contact.astype(bool).reshape(-1, legs)
+    trace.qpos = trace.qpos.reshape(-1, qpos_size)
