@@ -71,8 +71,8 @@ __all__ = ["CollectConfig", "CollectProgress", "CollectResult", "collect"]
 @dataclass(frozen=True, kw_only=True)
 class CollectConfig:
     """How samples are drawn and written. Everything but ``samples``, ``num_worlds``, ``chunk``, ``device`` and
-    ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it (checked when
-    built: one-line errors)."""
+    ``time_limit_s`` is stored in the file's settings, and a resumed collection must repeat it. The protocol is
+    checked when it is built, the rest when :func:`collect` starts (one-line errors, before any work)."""
 
     samples: int
     """Samples the file holds when collection ends (a resumed run continues up to this count)."""
