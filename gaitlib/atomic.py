@@ -18,6 +18,7 @@ from pathlib import Path
 __all__ = [
     "CHECKSUM_KEY",
     "atomic_path",
+    "file_sha256",
     "fsync_folder",
     "json_checksum",
     "read_json",
@@ -76,6 +77,15 @@ def stale_temporaries(path: Path) -> list[Path]:
     them only while no other process can be writing ``path``)."""
     path = Path(path)
     return sorted(path.parent.glob(f".{glob.escape(path.name)}.*.tmp{glob.escape(path.suffix)}"))
+
+
+def file_sha256(path: Path) -> str:
+    """SHA-256 of the bytes of the file ``path``, read in blocks (what ``sha256sum`` prints)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def json_checksum(payload: Mapping[str, object]) -> str:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
 import zipfile
 from dataclasses import dataclass
@@ -101,8 +102,8 @@ def load_states(path: Path) -> tuple[HandoverStates, str]:
     damaged or non-finite file."""
     path = Path(path)
     try:
-        data = path.read_bytes()
-        with np.load(path, allow_pickle=False) as npz:
+        data = path.read_bytes()  # read once: the checksum is of the bytes loaded
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             meta = json.loads(str(npz["meta"]))
             arrays = {name: npz[name] for name in ARRAYS}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # the zip's CRC-32 catches flips

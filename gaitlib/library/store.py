@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import json
 import math
 from collections.abc import Iterable, Mapping
@@ -35,7 +34,7 @@ from pathlib import Path
 
 import torch
 
-from gaitlib.atomic import CHECKSUM_KEY, json_checksum, read_json, write_json
+from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, read_json, write_json
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, clip_from_description
@@ -90,6 +89,8 @@ class Library:
     """The fit's accuracy report (Table 3 layout), in :attr:`SWITCHING`."""
     CALIBRATION = "calibration.json"
     """The transition-net's score mapped to real success probabilities, in :attr:`SWITCHING`."""
+    BUNDLE = (NET, TMT, ACCURACY, CALIBRATION)
+    """The files of :attr:`SWITCHING` that are fitted together and checked against :attr:`CHECKSUMS`."""
     CHECKSUMS = "checksums.json"
     """The SHA-256 of each of the other files of :attr:`SWITCHING`, checked before any of them is used."""
 
@@ -134,15 +135,14 @@ class Library:
         if not path.is_file():
             raise TransitionDataError(f"{path} is missing: the switching models are unchecked; run gaitlib fit again")
         listed = read_json(path, header=_CHECKSUMS_FORMAT, what="a gaitlib checksum list", error=TransitionDataError)
-        for name in (self.NET, self.TMT, self.ACCURACY, self.CALIBRATION):
+        for name in self.BUNDLE:
             file = self.switching_dir / name
-            if not file.is_file() or hashlib.sha256(file.read_bytes()).hexdigest() != listed["files"].get(name):
+            if not file.is_file() or file_sha256(file) != listed["files"].get(name):
                 raise TransitionDataError(f"{file} is missing or does not match its checksum in {path}")
 
     def write_checksums(self, folder: Path) -> Path:
         """Write ``checksums.json`` into the switching folder being staged at ``folder`` (after the other files)."""
-        files = {name: hashlib.sha256((folder / name).read_bytes()).hexdigest()
-                 for name in (self.NET, self.TMT, self.ACCURACY, self.CALIBRATION)}
+        files = {name: file_sha256(folder / name) for name in self.BUNDLE}
         return write_json(folder / self.CHECKSUMS, _CHECKSUMS_FORMAT | {"files": files}, checksum=True)
 
     def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
@@ -266,8 +266,8 @@ class Library:
                 "training": training,
                 "evaluation": evaluation,
                 "versions": _versions(),
-                "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
-                "onnx_sha256": hashlib.sha256((staging / "policy.onnx").read_bytes()).hexdigest(),
+                "sha256": file_sha256(weights),
+                "onnx_sha256": file_sha256(staging / "policy.onnx"),
                 "deployment": deployment_block(
                     clip=clip_from_description(description),
                     action=action,
@@ -313,11 +313,11 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
             "is named after its gait (a policy copied into another gait's folder?)"
         )
     weights = folder / "policy.pt"
-    if not weights.is_file() or hashlib.sha256(weights.read_bytes()).hexdigest() != metadata.get("sha256"):
+    if not weights.is_file() or file_sha256(weights) != metadata.get("sha256"):
         raise LibraryError(f"library entry '{name}' is damaged: policy.pt is missing or does not match its checksum")
     onnx = folder / "policy.onnx"  # the file a user deploys: checked where the entry records its checksum
     if "onnx_sha256" in metadata and (
-        not onnx.is_file() or hashlib.sha256(onnx.read_bytes()).hexdigest() != metadata["onnx_sha256"]
+        not onnx.is_file() or file_sha256(onnx) != metadata["onnx_sha256"]
     ):
         raise LibraryError(f"library entry '{name}' is damaged: policy.onnx is missing or does not match its checksum")
     try:

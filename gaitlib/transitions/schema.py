@@ -35,7 +35,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from gaitlib.atomic import atomic_path, fsync_folder
+from gaitlib.atomic import atomic_path, file_sha256, fsync_folder
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT
 from gaitlib.transitions.records import (
@@ -133,7 +133,7 @@ def write_part(path: Path, batch: TransitionBatch, *, start: int) -> Part:
                 )
                 ds.attrs["description"] = column.description
                 ds.attrs["units"] = column.units
-        digest = _sha256(tmp)
+        digest = file_sha256(tmp)
     return Part(name, len(batch), digest)
 
 
@@ -251,14 +251,6 @@ def _width(column: Column, latent_dim: int) -> tuple[int, ...]:
 def _first_line(error: BaseException) -> str:
     text = str(error).strip()
     return text.splitlines()[0] if text else type(error).__name__
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _open(file: Path, name: str) -> h5py.File:
