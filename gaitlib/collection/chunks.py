@@ -234,11 +234,11 @@ class ChunkSamples(TrialSchedule):
         def at(t: torch.Tensor) -> np.ndarray:
             return t[ids].cpu().numpy()
 
-        pairs = outcome.pair[rows].cpu()
+        pairs = np.asarray(self.pairs, dtype=np.int64).reshape(-1, 2)[outcome.pair[rows].cpu().numpy()]
         self._done.append(
             schema.TransitionBatch(
-                source=np.asarray([self.pairs[p][0] for p in pairs.tolist()], dtype=np.int64),
-                dest=np.asarray([self.pairs[p][1] for p in pairs.tolist()], dtype=np.int64),
+                source=pairs[:, 0],
+                dest=pairs[:, 1],
                 latent=at(self._latent),
                 phase_source=at(self._phase_source),
                 phase_dest=at(self._phase_dest),

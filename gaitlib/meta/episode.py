@@ -115,17 +115,14 @@ def run_episode(
         rows: dict[str, list] = {name: [] for name in _ROWS}
         trial = _OneTrial((m, n))
         trials = SwitchTrials(ctl, protocol, trial, seed=seed)
-        step = 0
         while trials.running:
-            active = int(env.gait[0])
             result = trials.step()
-            step += 1
             if result.events:
                 trace.switch = result.events[0]
             if bool(result.fell[0]):
-                trace.fell_s = step * env.dt
+                trace.fell_s = ctl.steps * env.dt
                 break
-            _record(rows, env, result, time_s=step * env.dt, active=n if result.events else active)
+            _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]))  # switched before acting
         _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
         return trace
     finally:
