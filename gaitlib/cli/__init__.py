@@ -7,7 +7,7 @@ import sys
 
 import typer
 
-from gaitlib.cli import library, switching, throughput, train, transitions
+from gaitlib.cli import gaits, library, switching, throughput, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -22,6 +22,7 @@ app = typer.Typer(
 app.command("train")(train.train_command)
 app.command("eval")(train.eval_command)
 app.command("library")(library.library_command)
+app.command("gaits")(gaits.gaits_command)
 app.command("collect")(transitions.collect_command)
 app.command("fit")(transitions.fit_command)
 app.command("states")(transitions.states_command)

@@ -81,6 +81,8 @@ def train_command(
 
     from gaitlib.cli.options import check_worlds
     from gaitlib.cli.progress import job_progress
+    from gaitlib.gaits import clip_from_description
+    from gaitlib.gaits.feasibility import check_reference
     from gaitlib.training import get_preset
     from gaitlib.training.distributed import Ranks
     from gaitlib.training.target import check_target, training_target
@@ -114,6 +116,7 @@ def train_command(
     console = Console(stderr=True)
     for note in plan.notes:
         console.print(f"gaitlib: {note}", soft_wrap=True)
+    console.print(f"gaitlib: {check_reference(clip_from_description(description)).summary()}", soft_wrap=True)
     with job_progress(console, f"train {gait}") as progress:
         task = progress.add_task("train", total=request.iterations, status="starting")
 
