@@ -135,7 +135,10 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     assert "stayed_up" in json.loads(ran.stdout)
 
 
-def test_switching_models_drive_the_pairs_they_were_fitted_on_and_name_the_others(switching_library, tmp_path):
+def test_models_drive_their_pairs_and_a_grown_library_needs_only_its_new_pairs_old_policies_untouched(
+    switching_library, tmp_path, monkeypatch
+):
+    from gaitlib.atomic import file_sha256
     from gaitlib.errors import GaitlibError
     from gaitlib.gaits import get_gait
     from gaitlib.meta import load_switching
@@ -143,7 +146,9 @@ def test_switching_models_drive_the_pairs_they_were_fitted_on_and_name_the_other
     from gaitlib.training import get_preset
     from gaitlib.training.trainer import TrainRequest, train_gait
 
+    monkeypatch.chdir(tmp_path)
     library = copy_library(Library(switching_library), tmp_path / "library")
+    old = {g: (library.entry(g).identity, file_sha256(library.root / g / "policy.pt")) for g in library.gaits()}
     train_gait(TrainRequest(description=get_gait("pace"), preset=get_preset("tiny"), iterations=1,
                             library=library.root, run_dir=tmp_path / "runs", backend="mujoco", eval_episodes=1,
                             eval_seconds=0.3))  # a gait added after the fit
@@ -158,3 +163,17 @@ def test_switching_models_drive_the_pairs_they_were_fitted_on_and_name_the_other
     assert trace.switch_s is None or trace.switch_s >= 0.2 - 1e-6
     with pytest.raises(GaitlibError, match=r"drive stand, trot, not pace; the switching models do not drive 4 pair"):
         run_episode(setup, source="pace", dest="stand", request_s=0.2, seconds=0.6, backend="mujoco")
+
+    # Growth as a user does it, by the commands `gaitlib library` prints: the new pairs alone are collected, the
+    # models fitted on the old file and the new one; no old policy's bytes or identity change.
+    (problem,) = status["problems"]
+    collect, fit = problem["commands"]
+    assert "--pairs pace-stand,pace-trot,stand-pace,trot-pace " in collect
+    collected = gaitlib_quick(*shlex.split(collect)[1:], "--worlds", "8")
+    assert collected.returncode == 0, collected.stderr
+    fitted = gaitlib_quick(*shlex.split(fit)[1:])
+    assert fitted.returncode == 0, fitted.stderr
+    grown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
+    assert grown["problems"] == [] and {v["state"] for v in grown["switching"]["pairs"].values()} == {"covered"}
+    after = Library(library.root)
+    assert {g: (after.entry(g).identity, file_sha256(after.root / g / "policy.pt")) for g in old} == old
