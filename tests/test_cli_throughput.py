@@ -41,7 +41,9 @@ def test_help_lists_only_working_commands() -> None:
     assert result.returncode == 0
     panel = result.stdout.split("Commands")[1]
     listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))
-    assert listed == {"benchmark", "throughput", "collect", "eval", "fit", "library", "map", "run", "states", "train"}
+    assert listed == {
+        "benchmark", "throughput", "collect", "eval", "fit", "gaits", "library", "map", "run", "states", "train"
+    }
 
 
 @pytest.mark.newton

@@ -116,13 +116,15 @@ def train_command(
     console = Console(stderr=True)
     for note in plan.notes:
         console.print(f"gaitlib: {note}", soft_wrap=True)
-    console.print(f"gaitlib: {check_reference(clip_from_description(description)).summary()}", soft_wrap=True)
     with job_progress(console, f"train {gait}") as progress:
         task = progress.add_task("train", total=request.iterations, status="starting")
 
         last_line = [0.0]
+        check = [check_reference(clip_from_description(description))]
 
         def show(stats) -> None:
+            if check:  # after the first iteration, so that every refusal stays one line
+                console.print(f"gaitlib: {check.pop().summary()}", soft_wrap=True)
             terms = " ".join(f"{k[:4]} {v:.2f}" for k, v in stats.reward_terms.items())
             length = "" if math.isnan(stats.mean_episode_length) else f" ep {stats.mean_episode_length:4.1f}s"
             status = f"{stats.samples_per_s:5.0f} samples/s  reward {stats.mean_reward:.3f}{length}  [{terms}]"
