@@ -1,9 +1,10 @@
 """Running the ``gaitlib`` command line as a user does: its exit code, stdout and stderr.
 
-:func:`gaitlib` starts a fresh process (the installed entry point's code path, C-level output included), as every
-command that simulates or writes is tested. :func:`gaitlib_quick` calls the same entry point,
-:func:`gaitlib.cli.main`, inside the test process: for refusals that happen before any work, and commands that
-only read (``fit --evaluate``), where a new interpreter would spend seconds importing torch.
+:func:`gaitlib` starts a fresh process (the installed entry point's code path, C-level output included): every
+command that simulates or writes runs that way in at least one test. :func:`gaitlib_quick` calls the same entry
+point, :func:`gaitlib.cli.main`, inside the test process, where a new interpreter would spend seconds importing
+torch: for refusals that happen before any work, commands that only read, and a test's further calls of a command
+already run in a fresh process elsewhere.
 """
 
 from __future__ import annotations

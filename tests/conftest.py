@@ -18,6 +18,19 @@ BACKENDS = [
     pytest.param("newton", marks=pytest.mark.newton),
 ]
 
+LONGEST_FILES = (
+    "test_cluster.py", "test_user_library.py", "test_cli_switching.py", "test_gpu_check.py", "test_cli_train.py",
+    "test_cli_transitions.py", "test_sim_backends.py", "test_distributed.py",
+)
+"""The test files that take longest (``pytest --durations``), run first: pytest-xdist hands whole files to its
+workers in collection order, so a long file collected last keeps one core busy while the other idles."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Longest files first (:data:`LONGEST_FILES`), the rest in their usual order."""
+    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
 
 @pytest.fixture(params=BACKENDS)
 def backend_name(request: pytest.FixtureRequest) -> str:

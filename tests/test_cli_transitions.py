@@ -36,7 +36,7 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     first = gaitlib("collect", "--samples", "16", "--out", data, "--library", lib, *QUICK)
     assert first.returncode == 0, first.stderr
     assert validate(data).count == 16
-    resumed = gaitlib("collect", "--samples", "3.2e1", "--out", data, "--library", lib, *QUICK)
+    resumed = gaitlib_quick("collect", "--samples", "3.2e1", "--out", data, "--library", lib, *QUICK)
     assert resumed.returncode == 0, resumed.stderr
     assert validate(data).count == 32 and "16 new" in resumed.stderr
 
@@ -64,7 +64,7 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert set(accuracy) <= {"stand-trot", "trot-stand"} and accuracy
     assert accuracy == evaluate_library(Library(library), read_all([data]), sources=[data])["accuracy"]
 
-    ran = gaitlib(
+    ran = gaitlib_quick(
         "run", "--from", "trot", "--to", "stand", "--strategy", "net", "--seconds", "1", "--request-at", "0.3",
         "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--library", lib, "--json",
     )

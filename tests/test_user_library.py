@@ -100,8 +100,8 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     fine = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
     assert fine["problems"] == [] and set(fine["switching"]["pairs"]) == {"stand-trot", "trot-stand"}
 
-    trained = run("train", "trot", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "1", "--seed", "5",
-                  "--library", str(library.root), "--run-dir", str(tmp_path / "runs"), cwd=tmp_path)
+    trained = gaitlib_quick("train", "trot", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "1",
+                            "--seed", "5", "--library", str(library.root), "--run-dir", str(tmp_path / "runs"))
     assert trained.returncode == 0, trained.stderr
     assert f"replacing {library.root / 'trot'}: the switching models there were fitted on the old trot" in (
         trained.stderr
@@ -121,7 +121,7 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     assert f"fix: {collect} && {fit}" in refused.stderr
 
     # The commands as printed; the collection on 8 worlds instead of 256 (a choice of the machine, not of the samples).
-    collected = run(*shlex.split(collect)[1:], "--worlds", "8", cwd=tmp_path)
+    collected = gaitlib_quick(*shlex.split(collect)[1:], "--worlds", "8")
     assert collected.returncode == 0, collected.stderr
     fitted = gaitlib_quick(*shlex.split(fit)[1:])
     assert fitted.returncode == 0, fitted.stderr
@@ -129,8 +129,8 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     assert after["problems"] == [] and {v["state"] for v in after["switching"]["pairs"].values()} == {"covered"}
     assert Library(library.root).entry("stand").identity == before
 
-    ran = run("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--seconds", "3",
-              "--json", cwd=tmp_path)
+    ran = gaitlib_quick("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--seconds", "3",
+                        "--json")
     assert ran.returncode == 0, ran.stderr
     assert "stayed_up" in json.loads(ran.stdout)
 
