@@ -16,6 +16,7 @@ which a share of resets use when the environment is given recorded states.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import torch
@@ -32,7 +33,7 @@ from gaitlib.envs.randomization import (
     WorldParameters,
     sample_world_parameters,
 )
-from gaitlib.envs.reference import ReferenceTracker
+from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, fallen
 from gaitlib.gaits import ReferenceClip
@@ -140,7 +141,7 @@ class ImitationEnv(VecEnv):
         self.episode_length_buf += 1
         self._state = state = self.backend.state()
 
-        ref = self.reference.frame()
+        ref, *goals = self._observed_frames(self.reference)
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
         terminated = diverged | fallen(
             state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination
@@ -159,7 +160,7 @@ class ImitationEnv(VecEnv):
             self.last_episode_length[done_ids] = self.episode_length_buf[done_ids]
             self.reset_worlds(done_ids)  # rebuilds the observations
         else:
-            self._obs = self._observations()
+            self._obs = self._observations(observed=(ref, *goals))
         return self._obs, reward, dones, extras
 
     # ------------------------------------------------------------------------------------------ switching
@@ -340,16 +341,25 @@ class ImitationEnv(VecEnv):
         self._last_reading = reading
         self._history = torch.cat([observed.unsqueeze(1), self._history[:, :-1]], dim=1)
 
-    def _observations(self, reference: ReferenceTracker | None = None, rows: torch.Tensor | None = None) -> TensorDict:
+    def _observed_frames(self, reference: ReferenceTracker) -> list[ReferenceFrame]:
+        """The references an observation reads: now, then at each of the goal offsets (one read of the clips)."""
+        return reference.frames([0.0, *(k * self.dt for k in obs_fn.REFERENCE_OFFSETS)])
+
+    def _observations(
+        self,
+        reference: ReferenceTracker | None = None,
+        rows: torch.Tensor | None = None,
+        observed: Sequence[ReferenceFrame] | None = None,
+    ) -> TensorDict:
         """Observations of every world under its reference, or of the worlds ``rows`` (R,) under ``reference`` (a
-        tracker of R rows)."""
+        tracker of R rows); ``observed``: the :meth:`_observed_frames` of every world, when already read."""
         reference = reference or self.reference
         ids = slice(None) if rows is None else rows
-        frames = [reference.frame(k * self.dt) for k in obs_fn.REFERENCE_OFFSETS]
+        now, *frames = observed or self._observed_frames(reference)
         s = self._state
         parts = [self._history[ids].flatten(1), obs_fn.reference_features(frames)]
         if self.cfg.observation.heading:
-            parts.append(obs_fn.heading_error(s.root_quat[ids], reference.frame().root_quat))
+            parts.append(obs_fn.heading_error(s.root_quat[ids], now.root_quat))
         actor = torch.cat(parts, dim=-1)
         privileged = obs_fn.privileged_features(
             s.root_quat[ids],
