@@ -35,6 +35,18 @@ def git(*args: str, cwd: Path) -> str:
     return subprocess.run(command, cwd=cwd, check=True, capture_output=True, text=True).stdout
 
 
+def run_fix(commands: list[str], library: Path) -> None:
+    """Run the collect and fit commands ``gaitlib library`` printed, as printed but for the collection's 8 worlds
+    instead of 256 (a choice of the machine, not of the samples), and check that nothing is left to fix."""
+    collect, fit = commands
+    collected = gaitlib_quick(*shlex.split(collect)[1:], "--worlds", "8")
+    assert collected.returncode == 0, collected.stderr
+    fitted = gaitlib_quick(*shlex.split(fit)[1:])
+    assert fitted.returncode == 0, fitted.stderr
+    after = json.loads(gaitlib_quick("library", "--library", str(library), "--json").stdout)
+    assert after["problems"] == [] and {v["state"] for v in after["switching"]["pairs"].values()} == {"covered"}
+
+
 @pytest.fixture
 def fresh_copy(tmp_path) -> Path:
     """The repository's files as a fresh clone would hold them (this working tree's, committed in a new git repo)."""
@@ -120,13 +132,7 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     assert refused.returncode == 2 and refused.stderr.count("\n") == 1
     assert f"fix: {collect} && {fit}" in refused.stderr
 
-    # The commands as printed; the collection on 8 worlds instead of 256 (a choice of the machine, not of the samples).
-    collected = gaitlib_quick(*shlex.split(collect)[1:], "--worlds", "8")
-    assert collected.returncode == 0, collected.stderr
-    fitted = gaitlib_quick(*shlex.split(fit)[1:])
-    assert fitted.returncode == 0, fitted.stderr
-    after = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
-    assert after["problems"] == [] and {v["state"] for v in after["switching"]["pairs"].values()} == {"covered"}
+    run_fix(problem["commands"], library.root)
     assert Library(library.root).entry("stand").identity == before
 
     ran = gaitlib_quick("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--seconds", "3",
@@ -167,13 +173,7 @@ def test_models_drive_their_pairs_and_a_grown_library_needs_only_its_new_pairs_o
     # Growth as a user does it, by the commands `gaitlib library` prints: the new pairs alone are collected, the
     # models fitted on the old file and the new one; no old policy's bytes or identity change.
     (problem,) = status["problems"]
-    collect, fit = problem["commands"]
-    assert "--pairs pace-stand,pace-trot,stand-pace,trot-pace " in collect
-    collected = gaitlib_quick(*shlex.split(collect)[1:], "--worlds", "8")
-    assert collected.returncode == 0, collected.stderr
-    fitted = gaitlib_quick(*shlex.split(fit)[1:])
-    assert fitted.returncode == 0, fitted.stderr
-    grown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)
-    assert grown["problems"] == [] and {v["state"] for v in grown["switching"]["pairs"].values()} == {"covered"}
+    assert "--pairs pace-stand,pace-trot,stand-pace,trot-pace " in problem["commands"][0]
+    run_fix(problem["commands"], library.root)
     after = Library(library.root)
     assert {g: (after.entry(g).identity, file_sha256(after.root / g / "policy.pt")) for g in old} == old
