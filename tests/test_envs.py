@@ -304,3 +304,19 @@ def test_a_fall_in_evaluation_is_a_tilt_not_a_turn() -> None:
     for heading in (True, False):
         assert orientation_lost(rolled, level, max_error=math.pi / 2, heading=heading)
         assert not orientation_lost(level, turned, max_error=math.pi / 2, heading=False)
+
+
+def test_references_read_together_are_the_references_read_one_by_one() -> None:
+    from gaitlib.envs.reference import ReferenceTracker
+
+    clips = [clip_from_description(get_gait(name)) for name in ("pace", "stand", "trot")]
+    tracker = ReferenceTracker(clips, 7, torch.device("cpu"))
+    generator = torch.Generator().manual_seed(3)
+    root_quat = quat_from_yaw(torch.rand(7, generator=generator) * 6.0 - 3.0)
+    root_pos = torch.rand(7, 3, generator=generator)
+    tracker.start(torch.arange(7), torch.tensor([0, 1, 2, 2, 0, 1, 2]), torch.rand(7, generator=generator) * 3.0,
+                  root_pos, root_quat)
+    offsets = [0.0, 1 / 30, 2 / 30, 10 / 30, 1.0]
+    for together, alone in zip(tracker.frames(offsets), [tracker.frame(dt) for dt in offsets], strict=True):
+        for name in alone.__dataclass_fields__:  # bit for bit: the environment's samples must not change
+            assert torch.equal(getattr(together, name), getattr(alone, name)), name
