@@ -141,7 +141,8 @@ class ImitationEnv(VecEnv):
         self.episode_length_buf += 1
         self._state = state = self.backend.state()
 
-        ref, *goals = self._observed_frames(self.reference)
+        observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
+        ref = observed[0]
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
         terminated = diverged | fallen(
             state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination
@@ -160,7 +161,7 @@ class ImitationEnv(VecEnv):
             self.last_episode_length[done_ids] = self.episode_length_buf[done_ids]
             self.reset_worlds(done_ids)  # rebuilds the observations
         else:
-            self._obs = self._observations(observed=(ref, *goals))
+            self._obs = self._observations(observed=observed)
         return self._obs, reward, dones, extras
 
     # ------------------------------------------------------------------------------------------ switching

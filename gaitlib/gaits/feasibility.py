@@ -124,8 +124,11 @@ def _centroidal(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     import mujoco
     import torch
 
+    from gaitlib.robots.a1.constants import TRUNK_BODY
+
     model = _model()
     data = mujoco.MjData(model)
+    trunk = model.body(TRUNK_BODY).id  # the root of the robot's tree: its subtree is the whole robot
     qpos = torch.cat([frame.root_pos, frame.root_quat, frame.joint_pos], dim=-1).double().numpy()
     qvel = torch.cat([frame.root_lin_vel, frame.root_ang_vel, frame.joint_vel], dim=-1).double().numpy()
     out = np.zeros((3, len(qpos), 3))
@@ -133,7 +136,7 @@ def _centroidal(frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         data.qpos[:], data.qvel[:] = qpos[n], qvel[n]
         mujoco.mj_forward(model, data)
         mujoco.mj_subtreeVel(model, data)
-        out[:, n] = data.subtree_com[1], data.subtree_linvel[1], data.subtree_angmom[1]
+        out[:, n] = data.subtree_com[trunk], data.subtree_linvel[trunk], data.subtree_angmom[trunk]
     return out[0], out[1], out[2]
 
 
