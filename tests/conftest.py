@@ -19,8 +19,8 @@ BACKENDS = [
 ]
 
 LONGEST_FILES = (
-    "test_cluster.py", "test_user_library.py", "test_cli_switching.py", "test_gpu_check.py", "test_cli_train.py",
-    "test_cli_transitions.py", "test_sim_backends.py", "test_distributed.py",
+    "test_cluster.py", "test_user_library.py", "test_sim_backends.py", "test_cli_switching.py", "test_cli_train.py",
+    "test_gpu_check.py", "test_cli_transitions.py", "test_distributed.py",
 )
 """The test files that take longest (``pytest --durations``), run first: pytest-xdist hands whole files to its
 workers in collection order, so a long file collected last keeps one core busy while the other idles."""
