@@ -29,6 +29,7 @@ from gaitlib.gaits import (
     register_gait,
     registry,
     save_motion_file,
+    synthesis,
     trunk_sway,
 )
 from gaitlib.robots.a1 import constants as c
@@ -267,8 +268,25 @@ def test_trunk_sway_is_the_periodic_inverted_pendulum_over_the_stance_feet() -> 
     # line passes under the trunk.
     assert abs(trunk_sway(get_gait("pace"), phase)).max() == pytest.approx(0.044, abs=0.001)
     assert not trunk_sway(_gait("pace-sway"), phase).any()
-    for name in ("trot", "bound", "pronk", "stand"):
+    for name in ("bound", "pronk", "stand"):
         assert abs(trunk_sway(_gait(f"{name}+sway"), phase)).max() < 1e-9, name
+
+
+def test_a_trot_sways_over_where_its_diagonal_line_runs() -> None:
+    # The diagonal pair's line crosses under the trunk at mid-stance and lies to one side at touchdown (the front
+    # foot d/2 ahead of its hip), the other side at lift-off: the pendulum's push is odd about mid-stance, so is the
+    # sway, which crosses the straight path at mid-stance (phases 0.2, 0.7) and reaches 1.4 cm each way.
+    trot = _gait("trot+sway")
+    sway = trunk_sway(trot, np.linspace(0.0, 1.0, 2001))
+    assert abs(sway).max() == pytest.approx(0.0136, abs=0.0005)
+    assert abs(trunk_sway(trot, np.array([0.2, 0.7]))).max() < 2e-4
+    after = np.linspace(0.0, 0.2, 9)
+    np.testing.assert_allclose(trunk_sway(trot, 0.2 + after), -trunk_sway(trot, 0.2 - after), atol=2e-4)
+    # The line's sideways point at touchdown, by hand: FR at x = 0.183 + d/2, y = -b; RL at -0.183 + d/2, +b.
+    d, b = trot.duty_factor * trot.stride_length, 0.047 + 0.08505
+    along = (0.183 + d / 2) / 0.366
+    stance = contact_schedule(trot, np.array([1e-6]))
+    assert synthesis._support_centre(trot, np.array([1e-6]), stance)[0] == pytest.approx(-b + along * 2 * b, abs=1e-4)
 
 
 def test_trot_foot_positions_hand_computed() -> None:

@@ -65,9 +65,11 @@ def trunk_sway(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     pendulum mode", IROS) whose zero-moment point is the lateral centre ``p`` of the stance feet's neutral points:
     ``y'' = (g / body_height) (y - p)`` while a foot is down, ``y'' = 0`` in flight. Its periodic solution over one
     cycle (second differences on a 512-point grid, one linear solve) is the sway: the trunk swings toward the feet
-    that bear it, is pushed back toward the other side and is caught by its feet. A pace, whose support line lies
-    0.13 m to one side for most of each half cycle, sways a few centimetres each way; a trot, whose diagonal
-    support line passes under the trunk, does not sway.
+    that bear it, is pushed back toward the other side and is caught by its feet. ``p`` is where the stance feet's
+    line runs at the trunk's x (two feet), else their mean lateral position. A pace, whose support line lies
+    0.13 m to one side for most of each half cycle, sways 4.4 cm each way; a trot's diagonal line crosses under
+    the trunk only at mid-stance and runs up to 11 cm to one side at touchdown and the other at lift-off, so its
+    trunk sways 1.4 cm; a pronk, a bound and a stand, whose feet are centred under the trunk, do not sway.
 
     Args:
         desc: the gait.
@@ -92,7 +94,7 @@ def _sway_cycle(desc: GaitDescription) -> np.ndarray:
     # Each grid point averages the pendulum over its own cell, so a touchdown between points is not moved onto one.
     cell = grid[:, None] + (np.arange(_CELL_SAMPLES) + 0.5) / (_CELL_SAMPLES * _SWAY_SAMPLES) - 0.5 / _SWAY_SAMPLES
     stance = contact_schedule(desc, cell)  # (points, cell samples, legs)
-    centre = (stance * _neutral_feet(desc)[:, 1]).sum(-1) / np.maximum(stance.sum(-1), 1)
+    centre = _support_centre(desc, cell, stance)
     omega_sq = np.where(stance.any(-1), _GRAVITY / desc.body_height, 0.0)  # 1/s^2; 0 in flight
     stiffness, pull = omega_sq.mean(-1), (omega_sq * centre).mean(-1)  # 1/s^2, m/s^2
     step = desc.period / _SWAY_SAMPLES
@@ -104,6 +106,30 @@ def _sway_cycle(desc: GaitDescription) -> np.ndarray:
     sway = np.linalg.solve(second_difference - np.diag(stiffness), -pull)
     sway.setflags(write=False)
     return sway
+
+
+def _support_centre(desc: GaitDescription, phase: np.ndarray, stance: np.ndarray) -> np.ndarray:
+    """(...) lateral point under the trunk the pendulum is balanced over, m: where the line between two stance feet
+    runs at the trunk's x (a diagonal pair's line crosses under the trunk only at mid-stance, and lies up to a few
+    centimetres to one side at touchdown and lift-off), else the mean of the stance feet's neutral y (one, three or
+    four feet; two whose line runs sideways under the trunk; 0 in flight)."""
+    feet_x, feet_y = _stance_x(desc, phase), _neutral_feet(desc)[:, 1]
+    count = stance.sum(-1)
+    centre = (stance * feet_y).sum(-1) / np.maximum(count, 1)
+    rank = np.cumsum(stance, axis=-1) * stance  # 1 at the first stance foot, 2 at the second, 0 at the others
+    first_x, second_x = (np.where(rank == k, feet_x, 0.0).sum(-1) for k in (1, 2))
+    first_y, second_y = (np.where(rank == k, feet_y, 0.0).sum(-1) for k in (1, 2))
+    span = second_x - first_x
+    line = (count == 2) & (np.abs(span) > 1e-9)
+    along = np.clip(-first_x / np.where(line, span, 1.0), 0.0, 1.0)  # where x = 0 lies between the two feet
+    return np.where(line, first_y + along * (second_y - first_y), centre)
+
+
+def _stance_x(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """(..., 4) trunk-frame x of each foot over its stance stroke (from ``+d/2`` to ``-d/2`` about its neutral
+    point; the values at swinging legs are not used), m."""
+    psi = _leg_phase(desc, phase)
+    return _neutral_feet(desc)[:, 0] + desc.duty_factor * desc.stride_length * (0.5 - psi / desc.duty_factor)
 
 
 def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
