@@ -6,15 +6,18 @@ import csv
 import dataclasses
 import json
 
+import numpy as np
 import pytest
 
 from gaitlib.benchmark.report import (
     CellResult,
     cell_results,
+    success_matrix,
     success_table,
     summary,
     wilson_interval,
     write_csv,
+    write_matrix,
     write_plot,
 )
 from gaitlib.benchmark.results import load_results
@@ -74,6 +77,23 @@ def test_the_net_margin_has_a_hand_computed_interval() -> None:
     assert lookahead["over_random"]["margin_pp"] == pytest.approx(23.0)
     assert "pace-stand" not in facts["margins"]["net"]  # no net there
     assert set(summary(rows, focus=("tmt",))["margins"]) == {"tmt"}
+
+
+
+def test_the_pair_matrix_puts_each_cell_at_its_source_row_and_destination_column(tmp_path) -> None:
+    def cell(strategy: str, pair: str, magnitude: float, successes: int) -> CellResult:
+        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0)
+
+    rows = [cell("net", "trot-stand", 0, 90), cell("net", "stand-pace", 0, 80), cell("net", "trot-stand", 100, 10)]
+    rows.append(cell("random", "pace-trot", 0, 70))
+    gaits, matrix = success_matrix(rows, strategy="net", magnitude_n=0)
+    assert gaits == ["trot", "stand", "pace"]  # as they first appear
+    expected = np.full((3, 3), np.nan)
+    expected[0, 1], expected[1, 2] = 0.9, 0.8  # trot -> stand, stand -> pace; pace -> trot is random's
+    np.testing.assert_array_equal(matrix, expected)
+    assert success_matrix(rows, strategy="net", magnitude_n=100)[1][0, 1] == pytest.approx(0.1)
+    figure = write_matrix(tmp_path / "matrix.png", rows)
+    assert figure.read_bytes().startswith(b"\x89PNG")
 
 
 def test_a_tiny_sweep_is_well_formed_and_resumes(switching_library, tmp_path) -> None:

@@ -87,7 +87,7 @@ def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library
     assert set(success) == {"random", "tmt-value", "net-lookahead"}
     assert set(success["random"]) == {"stand-trot"} and set(success["random"]["stand-trot"]) == {"0", "100"}
     assert all(0.0 <= v <= 1.0 for v in success["tmt-value"]["stand-trot"].values())
-    assert {p.name for p in out.iterdir()} >= {"results.json", "results.csv", "success.png"}
+    assert {p.name for p in out.iterdir()} >= {"results.json", "results.csv", "success.png", "matrix.png"}
     again = gaitlib_quick(*args)  # everything is done: it only reports
     assert again.returncode == 0 and "mean success over push magnitudes" in again.stdout
     margin = next(line for line in again.stdout.splitlines() if line.startswith("net-lookahead on stand-trot: vs"))

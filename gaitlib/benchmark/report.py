@@ -1,4 +1,5 @@
-"""Reading a disturbance sweep: success rates with 95% intervals, the CSV, the Fig. 4 plot and the summary.
+"""Reading a disturbance sweep: success rates with 95% intervals, the CSV, the Fig. 4 plot, the pair matrix and the
+summary.
 
 The interval is Wilson's score interval for a binomial proportion (sound at 0% and 100%, unlike the normal one).
 """
@@ -10,16 +11,20 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from gaitlib.atomic import atomic_path, save_figure
 
 __all__ = [
     "NET_STRATEGIES",
     "CellResult",
     "cell_results",
+    "success_matrix",
     "success_table",
     "summary",
     "wilson_interval",
     "write_csv",
+    "write_matrix",
     "write_plot",
 ]
 
@@ -185,4 +190,51 @@ def write_plot(path: Path, rows: list[CellResult], *, title: str = "") -> Path:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def success_matrix(rows: list[CellResult], *, strategy: str, magnitude_n: float) -> tuple[list[str], np.ndarray]:
+    """The gaits of ``rows`` (in the order they first appear, as source or destination) and the (G, G) success
+    rates of ``strategy`` at ``magnitude_n`` N: row the source, column the destination; NaN where no such cell ran
+    (the diagonal, and pairs the sweep left out)."""
+    gaits = list(dict.fromkeys(g for r in rows for g in r.pair.split("-")))
+    index = {g: i for i, g in enumerate(gaits)}
+    matrix = np.full((len(gaits), len(gaits)), np.nan)
+    for r in rows:
+        if r.strategy == strategy and r.magnitude_n == magnitude_n:
+            source, destination = r.pair.split("-")
+            matrix[index[source], index[destination]] = r.success_rate
+    return gaits, matrix
+
+
+def write_matrix(path: Path, rows: list[CellResult], *, magnitude_n: float | None = None, title: str = "") -> Path:
+    """Every ordered pair's success rate as a source-by-destination heat map, one panel per strategy, at
+    ``magnitude_n`` N (default: the smallest swept), each cell labelled in percent; the colour scale runs from 80%
+    (and below) to 100% in every figure, so that figures compare and the last points to a 99% goal show. PNG,
+    written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    magnitude = min(r.magnitude_n for r in rows) if magnitude_n is None else magnitude_n
+    strategies = list(dict.fromkeys(r.strategy for r in rows))
+    gaits = success_matrix(rows, strategy=strategies[0], magnitude_n=magnitude)[0]
+    size = 1.6 + 0.6 * len(gaits)  # inches a panel
+    fig, axes = plt.subplots(
+        1, len(strategies), figsize=(size * len(strategies) + 1.0, size + 0.6), squeeze=False, layout="constrained"
+    )
+    for ax, strategy in zip(axes.flat, strategies, strict=True):
+        matrix = success_matrix(rows, strategy=strategy, magnitude_n=magnitude)[1]
+        image = ax.imshow(matrix, cmap="RdYlGn", vmin=0.8, vmax=1.0)
+        for (i, j), value in np.ndenumerate(matrix):
+            if not np.isnan(value):
+                ax.text(j, i, f"{100 * value:.1f}", ha="center", va="center", fontsize=7)
+        ax.set_xticks(range(len(gaits)), gaits, rotation=45, ha="right", rotation_mode="anchor")
+        ax.set_yticks(range(len(gaits)), gaits if ax is axes[0, 0] else [])
+        ax.set_xlabel("to")
+        ax.set_title(strategy)
+    axes[0, 0].set_ylabel("from")
+    fig.colorbar(image, ax=list(axes.flat), fraction=0.05, label="success rate")
+    fig.suptitle(f"{title}{'; ' if title else ''}{magnitude:g} N")
     return save_figure(fig, path)

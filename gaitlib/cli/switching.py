@@ -156,7 +156,14 @@ def benchmark_command(
     from rich.console import Console
 
     from gaitlib.benchmark.gap import DeploymentGap
-    from gaitlib.benchmark.report import cell_results, success_table, summary, write_csv, write_plot
+    from gaitlib.benchmark.report import (
+        cell_results,
+        success_table,
+        summary,
+        write_csv,
+        write_matrix,
+        write_plot,
+    )
     from gaitlib.benchmark.sweep import SweepConfig, run_sweep
     from gaitlib.cli.options import check_worlds, cluster_config, parse_magnitudes, parse_pairs
     from gaitlib.cli.progress import job_progress
@@ -204,6 +211,7 @@ def benchmark_command(
     write_csv(out / "results.csv", rows)
     title = f"{samples} transitions per point, 95% Wilson intervals" + _gap_title(gap)
     plot = write_plot(out / "success.png", rows, title=title)
+    write_matrix(out / "matrix.png", rows, title=title)
     facts = summary(rows)
     if as_json:
         print(json.dumps({"success": success_table(rows), "summary": facts, "out": str(out)}))
