@@ -62,7 +62,7 @@ def trunk_sway(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     """Sideways trunk offset from the straight path, zero unless ``desc.trunk_sway``.
 
     The trunk is a linear inverted pendulum of height ``body_height`` (Kajita et al. 2001, "The 3D linear inverted
-    pendulum mode", IROS) whose zero-moment point is the lateral centre ``p`` of the stance feet's neutral points:
+    pendulum mode", IROS) whose zero-moment point ``p`` lies under the stance feet's neutral points:
     ``y'' = (g / body_height) (y - p)`` while a foot is down, ``y'' = 0`` in flight. Its periodic solution over one
     cycle (second differences on a 512-point grid, one linear solve) is the sway: the trunk swings toward the feet
     that bear it, is pushed back toward the other side and is caught by its feet. ``p`` is where the stance feet's
@@ -110,9 +110,9 @@ def _sway_cycle(desc: GaitDescription) -> np.ndarray:
 
 def _support_centre(desc: GaitDescription, phase: np.ndarray, stance: np.ndarray) -> np.ndarray:
     """(...) lateral point under the trunk the pendulum is balanced over, m: where the line between two stance feet
-    runs at the trunk's x (a diagonal pair's line crosses under the trunk only at mid-stance, and lies up to a few
-    centimetres to one side at touchdown and lift-off), else the mean of the stance feet's neutral y (one, three or
-    four feet; two whose line runs sideways under the trunk; 0 in flight)."""
+    runs at the trunk's x (a diagonal pair's line crosses under the trunk only at mid-stance; the trot's lies up to
+    11 cm to one side at touchdown and to the other at lift-off), else the mean of the stance feet's neutral y
+    (one, three or four feet; two whose line runs sideways under the trunk; 0 in flight)."""
     feet_x, feet_y = _stance_x(desc, phase), _neutral_feet(desc)[:, 1]
     count = stance.sum(-1)
     centre = (stance * feet_y).sum(-1) / np.maximum(count, 1)
