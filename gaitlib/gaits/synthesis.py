@@ -147,7 +147,6 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     stride = desc.stride_length
     stance_travel = duty * stride
     in_stance = psi < duty
-    stance_x = stance_travel * (0.5 - psi / duty)
     swing_fraction = 1.0 - duty
     s = np.clip((psi - duty) / swing_fraction, 0.0, 1.0) if swing_fraction > 0.0 else np.zeros_like(psi)
     angle = 2.0 * np.pi * s
@@ -156,7 +155,7 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     lift = desc.swing_height * 0.5 * (1.0 - np.cos(angle))
 
     neutral = _neutral_feet(desc)
-    x = neutral[:, 0] + np.where(in_stance, stance_x, swing_x)
+    x = np.where(in_stance, _stance_x(desc, phase), neutral[:, 0] + swing_x)
     y = neutral[:, 1] - trunk_sway(desc, phase)[..., None]
     z = FOOT_RADIUS - desc.body_height + np.where(in_stance, 0.0, lift)
     return np.stack([x, y, z], axis=-1)
