@@ -65,7 +65,7 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert accuracy == evaluate_library(Library(library), read_all([data]), sources=[data])["accuracy"]
 
     ran = gaitlib_quick(
-        "run", "--from", "trot", "--to", "stand", "--strategy", "net", "--seconds", "1", "--request-at", "0.3",
+        "run", "--from", "trot", "--to", "stand", "--strategy", "net", "--hold", "0.7", "--request-at", "0.3",
         "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--library", lib, "--json",
     )
     assert ran.returncode == 0, ran.stderr

@@ -10,6 +10,7 @@ import torch
 
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import DISTURBANCE_LEAD_S, RandomizationConfig
+from gaitlib.errors import GaitlibError
 from gaitlib.meta import MetaController, load_switching
 from gaitlib.meta.episode import run_episode
 from gaitlib.sim import make_backend
@@ -118,15 +119,16 @@ def shipped():
 def test_run_episode_records_the_switch(shipped, strategy) -> None:
     request_s, deadline_s = 0.3, 0.5
     trace = run_episode(
-        shipped, source="trot", dest="stand", strategy=strategy, request_s=request_s, seconds=1.2,
+        shipped, source="trot", dests=["stand"], strategy=strategy, request_s=request_s, hold_s=0.9,
         deadline_s=deadline_s, seed=2, backend="mujoco",
     )
     trot, stand = shipped.gait_index("trot"), shipped.gait_index("stand")
-    steps, event = len(trace.time_s), trace.switch
+    steps, (event,), (switch_s,) = len(trace.time_s), trace.switches, trace.switches_s
     assert trace.qpos.shape == (steps, 19) and trace.foot_contact.shape == (steps, 4)
-    assert event is not None and (event.source, event.dest) == (trot, stand) and 0.0 <= event.phase < 1.0
-    assert request_s - 1e-9 <= trace.switch_s <= request_s + deadline_s + 1e-9
-    assert event.wait_s == pytest.approx(trace.switch_s - round(request_s / trace.dt) * trace.dt)
+    assert (event.source, event.dest) == (trot, stand) and 0.0 <= event.phase < 1.0
+    assert trace.requests_s == [pytest.approx(round(request_s / trace.dt) * trace.dt)]
+    assert request_s - 1e-9 <= switch_s <= request_s + deadline_s + 1e-9
+    assert event.wait_s == pytest.approx(switch_s - trace.requests_s[0])
     assert (trace.active[: event.step] == trot).all() and (trace.active[event.step :] == stand).all()
     waiting = np.isfinite(trace.score)  # the best score is recorded exactly while the request waits
     assert waiting.sum() == (0 if strategy == "random" else event.step - round(request_s / trace.dt) + 1)
@@ -141,11 +143,11 @@ def test_pushes_hit_only_inside_the_disturbance_window() -> None:
     trace = run_episode(
         load_switching(None),  # trained policies: the robot outlives the window (pace to stand: 99% at 0 N)
         source="pace",
-        dest="stand",
+        dests=["stand"],
         strategy="net",
         request_s=request_s,
         push_n=40.0,
-        seconds=3.5,  # a push would start again within 1 s of the window's end (the longest quiet time)
+        hold_s=2.5,  # a push would start again within 1 s of the window's end (the longest quiet time)
         deadline_s=deadline_s,
         seed=3,
     )
@@ -155,6 +157,37 @@ def test_pushes_hit_only_inside_the_disturbance_window() -> None:
     longest_push = 0.3
     assert pushed.min() > request_s - DISTURBANCE_LEAD_S
     assert pushed.max() <= request_s + deadline_s + longest_push + trace.dt  # the last push runs out
+
+
+def test_a_sequence_chains_its_switches_each_in_its_own_push_window(shipped) -> None:
+    request_s, hold_s, deadline_s, lead_s = 0.9, 1.4, 0.5, DISTURBANCE_LEAD_S
+    trace = run_episode(
+        shipped, source="pace", dests=["stand", "pace"], strategy="tmt", request_s=request_s, hold_s=hold_s,
+        push_n=20.0, deadline_s=deadline_s, seed=4, backend="mujoco",
+    )
+    pace, stand = shipped.gait_index("pace"), shipped.gait_index("stand")
+    assert trace.stayed_up and [(e.source, e.dest) for e in trace.switches] == [(pace, stand), (stand, pace)]
+    dt, (first, second) = trace.dt, trace.switches_s
+    assert trace.requests_s[0] == pytest.approx(round(request_s / dt) * dt)
+    assert trace.requests_s[1] == pytest.approx(first + hold_s, abs=dt + 1e-9)  # the hold counts from the switch
+    assert trace.time_s[-1] == pytest.approx(second + hold_s, abs=dt + 1e-9)
+    for event, request in zip(trace.switches, trace.requests_s, strict=True):
+        assert event.wait_s == pytest.approx(event.step * dt - request) and event.wait_s <= deadline_s + 1e-9
+    active = trace.active
+    assert (active[trace.time_s <= first] == pace).all() and (active[trace.time_s > second] == pace).all()
+    assert (active[(trace.time_s > first) & (trace.time_s <= second)] == stand).all()
+    pushed = trace.time_s[trace.push > 0]
+    for request in trace.requests_s:  # every request meets pushes, from the lead before it to the deadline after
+        assert ((pushed > request - lead_s) & (pushed <= request + deadline_s + 0.3 + dt)).any()
+    inside = [(pushed > r - lead_s) & (pushed <= r + deadline_s + 0.3 + dt) for r in trace.requests_s]
+    assert (inside[0] | inside[1]).all()  # and nowhere else
+
+
+def test_a_sequence_that_repeats_the_running_gait_is_refused(shipped) -> None:
+    with pytest.raises(GaitlibError, match=r"'stand' is requested while the robot already runs it"):
+        run_episode(shipped, source="trot", dests=["stand", "stand"], backend="mujoco")
+    with pytest.raises(GaitlibError, match=r"the hold \(0.5 s\) longer than the pushes' lead before a request"):
+        run_episode(shipped, source="trot", dests=["stand"], request_s=1.0, hold_s=0.5, backend="mujoco")
 
 
 @pytest.mark.newton

@@ -81,7 +81,7 @@ def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alon
 
     main_job = run("run", "--from", "trot", "--to", "stand", "--json", cwd=fresh_copy, env=env)
     assert main_job.returncode == 0, main_job.stderr
-    assert json.loads(main_job.stdout)["switch_s"] >= 2.0 - 1e-6
+    assert json.loads(main_job.stdout)["switches"][0]["switch_s"] >= 2.0 - 1e-6
 
     refused = run("train", "stand", "--iterations", "1", "--library", "library", cwd=fresh_copy, env=env)
     assert refused.returncode == 2 and refused.stdout == ""
@@ -135,7 +135,7 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     run_fix(problem["commands"], library.root)
     assert Library(library.root).entry("stand").identity == before
 
-    ran = gaitlib_quick("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--seconds", "3",
+    ran = gaitlib_quick("run", "--from", "trot", "--to", "stand", "--library", str(library.root), "--hold", "1",
                         "--json")
     assert ran.returncode == 0, ran.stderr
     assert "stayed_up" in json.loads(ran.stdout)
@@ -164,11 +164,11 @@ def test_models_drive_their_pairs_and_a_grown_library_needs_only_its_new_pairs_o
                       "stand-trot": "covered", "trot-pace": "uncovered", "trot-stand": "covered"}
     setup = load_switching(library.root)
     assert setup.gaits == ("stand", "trot")
-    trace = run_episode(setup, source="trot", dest="stand", strategy="net", request_s=0.2, seconds=0.6,
+    trace = run_episode(setup, source="trot", dests=["stand"], strategy="net", request_s=0.2, hold_s=0.4,
                         deadline_s=0.3, backend="mujoco")
-    assert trace.switch_s is None or trace.switch_s >= 0.2 - 1e-6
+    assert all(t >= 0.2 - 1e-6 for t in trace.switches_s)
     with pytest.raises(GaitlibError, match=r"drive stand, trot, not pace; the switching models do not drive 4 pair"):
-        run_episode(setup, source="pace", dest="stand", request_s=0.2, seconds=0.6, backend="mujoco")
+        run_episode(setup, source="pace", dests=["stand"], request_s=0.2, hold_s=0.4, backend="mujoco")
 
     # Growth as a user does it, by the commands `gaitlib library` prints: the new pairs alone are collected, the
     # models fitted on the old file and the new one; no old policy's bytes or identity change.

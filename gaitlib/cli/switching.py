@@ -1,4 +1,4 @@
-"""``gaitlib run`` (one robot, one requested switch, with a plot and a video) and ``gaitlib benchmark`` (the
+"""``gaitlib run`` (one robot, requested switches, with a plot and a video) and ``gaitlib benchmark`` (the
 disturbance sweep of every strategy over every pair)."""
 
 from __future__ import annotations
@@ -29,18 +29,23 @@ __all__ = ["benchmark_command", "run_command"]
 
 def run_command(
     source: str = typer.Option("trot", "--from", help="Gait the robot starts in."),
-    dest: str = typer.Option("stand", "--to", help="Gait requested."),
+    dests: str = typer.Option(
+        "stand", "--to", help="Gait requested, or gaits one after the other (stand,pace,trot)."
+    ),
     strategy: str = typer.Option(
         DEFAULT_STRATEGY, "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
     ),
-    request_at: float = typer.Option(2.0, "--request-at", help="When the switch is requested, s, in [0, --seconds)."),
+    request_at: float = typer.Option(2.0, "--request-at", help="When the first switch is requested, s."),
+    hold: float = bounded(
+        4.0, "--hold", help="Time each requested gait runs after its switch, before the next request or the end;",
+        bounds=EPISODE_SECONDS,
+    ),
     push: float = bounded(
         0.0,
         "--push",
-        help="Push magnitude (0: none); pushes from 0.6 s before the request until 2 s after it;",
+        help="Push magnitude (0: none); pushes from 0.6 s before each request until 2 s after it;",
         bounds=PUSH_N,
     ),
-    seconds: float = bounded(6.0, "--seconds", help="Length of the run;", bounds=EPISODE_SECONDS),
     action_delay: int | None = bounded(
         None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
         "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
@@ -52,16 +57,18 @@ def run_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
-    """Run one robot in --from, request --to, and let the meta-controller switch with --strategy."""
+    """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
+    with --strategy."""
     from gaitlib.cli.options import OptionError, check_out_file
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
 
-    if not 0.0 <= request_at < seconds:  # NaN fails too
-        raise OptionError(
-            f"--request-at must be a finite number in [0, --seconds) = [0, {seconds:g}) s, got {request_at:g}"
-        )
+    if not 0.0 <= request_at <= 600.0:  # NaN fails too
+        raise OptionError(f"--request-at must be a finite number in [0, 600] s, got {request_at:g}")
+    sequence = [g.strip() for g in dests.split(",")]
+    if "" in sequence:
+        raise OptionError(f"--to takes gait names separated by commas, got '{dests}'")
     check_out_file("--plot", plot)
     if video is not None:
         check_out_file("--video", video)
@@ -69,11 +76,11 @@ def run_command(
     trace = run_episode(
         setup,
         source=source,
-        dest=dest,
+        dests=sequence,
         strategy=strategy,
         request_s=request_at,
+        hold_s=hold,
         push_n=push,
-        seconds=seconds,
         action_delay=action_delay,
         backend=backend,
         seed=seed,
@@ -84,17 +91,25 @@ def run_command(
         from gaitlib.robots import get_robot
 
         render_video(trace.qpos, video, fps=1.0 / trace.dt, model_xml=get_robot("a1").mjcf_path)
-    event = trace.switch
+    switches = [
+        {
+            "from": setup.gaits[event.source],
+            "to": setup.gaits[event.dest],
+            "request_s": request_s,
+            "switch_s": switch_s,
+            "wait_s": event.wait_s,
+            "score": None if event.score != event.score else event.score,  # NaN (random): null
+            "phase": event.phase,
+            "forced": event.forced,
+        }
+        for event, request_s, switch_s in zip(trace.switches, trace.requests_s, trace.switches_s, strict=False)
+    ]
     report = {
         "from": source,
-        "to": dest,
+        "to": sequence,
         "strategy": strategy,
-        "request_s": request_at,
-        "switch_s": trace.switch_s,
-        "wait_s": None if event is None else event.wait_s,
-        "score": None if event is None or event.score != event.score else event.score,  # NaN (random): null
-        "phase": None if event is None else event.phase,
-        "forced": None if event is None else event.forced,
+        "requests_s": trace.requests_s,
+        "switches": switches,
         "stayed_up": trace.stayed_up,
         "fell_s": trace.fell_s,
         "plot": str(plot),
@@ -103,17 +118,17 @@ def run_command(
     if as_json:
         print(json.dumps(report))
         return
-    if event is None:
-        switched = "no switch happened"
-    else:
-        how = "forced by the deadline" if event.forced else f"score {event.score:.3f}"
-        if event.score != event.score:  # NaN: random has no score
+    for switch in switches:
+        how = "forced by the deadline" if switch["forced"] else f"score {switch['score']:.3f}"
+        if switch["score"] is None:
             how = "random: no score"
-        switched = (
-            f"switched at {trace.switch_s:.2f} s after waiting {event.wait_s:.2f} s ({how}, φn = {event.phase:.3f})"
+        print(
+            f"{switch['from']} -> {switch['to']}: requested at {switch['request_s']:.2f} s, switched at "
+            f"{switch['switch_s']:.2f} s after waiting {switch['wait_s']:.2f} s ({how}, φn = {switch['phase']:.3f})"
         )
     outcome = "stayed up" if trace.stayed_up else f"FELL at {trace.fell_s:.2f} s"
-    print(f"{source} -> {dest} with {strategy}: requested at {request_at:.2f} s, {switched}; the robot {outcome}")
+    print(f"{' -> '.join((source, *sequence))} with {strategy}: {len(switches)} of {len(sequence)} switch(es) made; "
+          f"the robot {outcome}")
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
 
 

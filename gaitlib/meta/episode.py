@@ -1,8 +1,11 @@
-"""One robot, one requested switch: what ``gaitlib run`` does, recorded step by step for the plot and the video."""
+"""One robot, a sequence of requested switches: what ``gaitlib run`` does, recorded step by step for the plot and
+the video."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 import torch
@@ -21,28 +24,27 @@ __all__ = ["RunTrace", "run_episode"]
 
 @dataclass
 class RunTrace:
-    """A recorded run: per control step arrays (T = steps run) and the switch."""
+    """A recorded run: per control step arrays (T = steps run), the requests and the switches."""
 
     gaits: tuple[str, ...]
     source: str
-    dest: str
+    dests: tuple[str, ...]
+    """The gaits requested, in order."""
     strategy: str
-    threshold: float | None
-    """The strategy's threshold for this pair (``None`` for ``random``)."""
+    thresholds: tuple[float | None, ...]
+    """The strategy's threshold for each requested switch's pair (``None`` for ``random``)."""
     dt: float
     """Control period, s."""
-    request_s: float
-    """When the switch was requested, s."""
     push_n: float
-    """Push magnitude, N (0: none): pushes hit from ``DISTURBANCE_LEAD_S`` before the request until the deadline."""
+    """Push magnitude, N (0: none): pushes hit from ``DISTURBANCE_LEAD_S`` before each request until the deadline."""
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) time at the end of each step, s."""
     active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     """(T,) active gait index during each step."""
     score: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    """(T,) the strategy's best candidate score while the request waited (NaN otherwise)."""
+    """(T,) the strategy's best candidate score while a request waited (NaN otherwise)."""
     best_phase: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    """(T,) the best candidate destination phase while the request waited, cycles (NaN otherwise)."""
+    """(T,) the best candidate destination phase while a request waited, cycles (NaN otherwise)."""
     root_height: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) trunk height, m."""
     push: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -51,8 +53,10 @@ class RunTrace:
     """(T, feet) foot contacts, in the robot's foot order (the A1's FR, FL, RR, RL)."""
     qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     """(T, 7 + joints) generalized positions (trunk position, quaternion w-x-y-z, joints) for rendering."""
-    switch: SwitchEvent | None = None
-    """The switch, if one happened."""
+    requests_s: list[float] = field(default_factory=list)
+    """When each switch was requested, s (one per request made; a fall ends the run before the rest)."""
+    switches: list[SwitchEvent] = field(default_factory=list)
+    """The switches made, in order."""
     fell_s: float | None = None
     """When the robot fell (the run stops there), s; ``None`` if it stayed up."""
 
@@ -61,85 +65,106 @@ class RunTrace:
         return self.fell_s is None
 
     @property
-    def switch_s(self) -> float | None:
-        """When the switch happened, s."""
-        return None if self.switch is None else self.switch.step * self.dt
+    def switches_s(self) -> list[float]:
+        """When each switch happened, s."""
+        return [event.step * self.dt for event in self.switches]
 
 
 def run_episode(
     setup: SwitchingSetup,
     *,
     source: str,
-    dest: str,
+    dests: Sequence[str],
     strategy: str = DEFAULT_STRATEGY,
     request_s: float = 2.0,
+    hold_s: float = 4.0,
     push_n: float = 0.0,
-    seconds: float = 6.0,
     deadline_s: float = DEADLINE_S,
     action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
 ) -> RunTrace:
-    """One switch trial of :mod:`gaitlib.meta.trials` on one robot: run ``source``, request ``dest`` at
-    ``request_s``, let ``strategy`` switch; pushes of ``push_n`` (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s
-    before each) hit it from ``DISTURBANCE_LEAD_S`` before the request until ``deadline_s`` after it (the
-    benchmark's window). ``action_delay``: every action waits exactly this many control steps (``None``: the
-    policies' trained random delay). Stops ``seconds - request_s`` after the switch's control step, or at a fall."""
-    m, n = setup.gait_index(source), setup.gait_index(dest)
-    if m == n:
-        raise GaitlibError(f"--from and --to are both '{source}'")
-    if not 0 <= request_s < seconds:
-        raise GaitlibError(f"the request ({request_s:g} s) must come within the run ({seconds:g} s)")
+    """Switch trials of :mod:`gaitlib.meta.trials`, chained on one robot: run ``source``, request ``dests[0]`` at
+    ``request_s``, let ``strategy`` switch; ``hold_s`` after the end of that switch's control step request the next
+    gait of ``dests``, and so on; the run ends ``hold_s`` after the last switch, or at a fall. Pushes of ``push_n``
+    (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit the robot from ``DISTURBANCE_LEAD_S`` before
+    each request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits
+    exactly this many control steps (``None``: the policies' trained random delay)."""
+    dests = (dests,) if isinstance(dests, str) else tuple(dests)
+    gaits = [setup.gait_index(g) for g in (source, *dests)]  # unknown names: one line each
+    if not dests:
+        raise GaitlibError("no gait requested")
+    for a, b in pairwise((source, *dests)):
+        if a == b:
+            raise GaitlibError(f"'{a}' is requested while the robot already runs it")
+    lead_s = min(DISTURBANCE_LEAD_S, request_s) if request_s >= 0 else 0.0
+    if not request_s >= 0 or not hold_s > lead_s:  # NaN fails too
+        raise GaitlibError(
+            f"the request time ({request_s:g} s) must not be negative and the hold ({hold_s:g} s) longer than the "
+            f"pushes' lead before a request ({lead_s:g} s)"
+        )
+    pairs = list(pairwise(gaits))
+    # Each trial's verdict horizon ends where the next request's push lead begins; the last one's lead is run below.
     protocol = TrialProtocol(
-        warmup_s=request_s, source_extra_s=0.0, horizon_s=seconds - request_s, deadline_s=deadline_s,
-        push_lead_s=min(DISTURBANCE_LEAD_S, request_s),
+        warmup_s=request_s, source_extra_s=0.0, horizon_s=hold_s - lead_s, deadline_s=deadline_s,
+        push_lead_s=lead_s, chain=True,
     )
     sim = make_backend(backend, num_worlds=1)
     try:
         pushes = protocol.pushes(push_n, fixed=True)
+        seconds = request_s + len(pairs) * (deadline_s + hold_s) + 1.0
         env = setup.make_env(
-            sim, EnvConfig(episode_seconds=seconds + deadline_s + 1.0, pushes=pushes), seed=seed,
-            action_delay=action_delay,
+            sim, EnvConfig(episode_seconds=seconds, pushes=pushes), seed=seed, action_delay=action_delay
         )
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
+        threshold = None if strategy == "random" else ctl.strategy.threshold
         trace = RunTrace(
             gaits=setup.gaits,
             source=source,
-            dest=dest,
+            dests=dests,
             strategy=strategy,
-            threshold=None if strategy == "random" else _pair_threshold(ctl.strategy.threshold, (m, n)),
+            thresholds=tuple(_pair_threshold(threshold, pair) for pair in pairs),
             dt=env.dt,
-            request_s=request_s,
             push_n=push_n,
         )
         rows: dict[str, list] = {name: [] for name in _ROWS}
-        trial = _OneTrial((m, n))
-        trials = SwitchTrials(ctl, protocol, trial, seed=seed)
-        while trials.running:
-            result = trials.step()
-            if result.events:
-                trace.switch = result.events[0]
+        trials = SwitchTrials(ctl, protocol, _Sequence(pairs), seed=seed)
+        tail = round(lead_s / env.dt)
+        while trials.running or tail > 0:
+            if trials.running:
+                result = trials.step()
+            else:
+                result, tail = ctl.step(), tail - 1
+            trace.switches += result.events
             if bool(result.fell[0]):
                 trace.fell_s = ctl.steps * env.dt
                 break
             _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]))  # switched before acting
+            if int(ctl.queued[0]) >= 0 and len(trace.requests_s) == len(trace.switches):
+                trace.requests_s.append(ctl.steps * env.dt)  # requested at the end of this step
         _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
         return trace
     finally:
         sim.close()
 
 
-class _OneTrial(TrialSchedule):
-    """One trial of one pair; a source fall ends it (the robot is down)."""
+class _Sequence(TrialSchedule):
+    """The trials of one robot, one pair after the other, chained; a fall ends them (the robot is down)."""
 
-    def __init__(self, pair: tuple[int, int]) -> None:
-        self.pairs = [pair]
-        self._begun = False
+    def __init__(self, pairs: list[tuple[int, int]]) -> None:
+        self.pairs = pairs
+        self._next = 0
 
     def begin(self, k: int) -> torch.Tensor:
         pairs = torch.full((k,), -1, dtype=torch.long)
-        pairs[0] = -1 if self._begun else 0
-        self._begun = True
+        if self._next == 0:
+            pairs[0], self._next = 0, 1
+        return pairs
+
+    def chain(self, gaits: torch.Tensor) -> torch.Tensor:
+        pairs = torch.full((len(gaits),), -1, dtype=torch.long)
+        if self._next < len(self.pairs):
+            pairs[0], self._next = self._next, self._next + 1
         return pairs
 
     def source_fell(self, pairs: torch.Tensor) -> bool:
@@ -147,6 +172,10 @@ class _OneTrial(TrialSchedule):
 
     def finished(self, outcome: TrialOutcome) -> None:
         pass  # the trace is the outcome
+
+    @property
+    def done(self) -> bool:
+        return False  # the engine stops when no trial runs: after the last hold, or at a fall
 
 
 def _pair_threshold(threshold: float | dict | None, pair: tuple[int, int]) -> float | None:

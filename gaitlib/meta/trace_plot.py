@@ -16,8 +16,8 @@ _FEET = ("FR", "FL", "RR", "RL")
 
 def plot_trace(trace: RunTrace, path: Path) -> Path:
     """Write ``trace`` as a three-panel PNG (atomically): the strategy's best score and its destination phase
-    while the request waits (threshold dashed), trunk height with the pushes shaded, and the gait diagram (feet in
-    contact, dark) with the request and the switch marked."""
+    while a request waits (its pair's threshold dashed), trunk height with the pushes shaded, and the gait diagram
+    (feet in contact, dark) with the requests and the switches marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -29,8 +29,12 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
         3, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1.3, 1.2]}
     )
     ax_score.plot(t, trace.score, ".-", color="tab:blue", markersize=3, label="best score")  # a 1-step wait shows
-    if trace.threshold is not None and np.isfinite(trace.threshold):
-        ax_score.axhline(trace.threshold, color="tab:blue", linestyle="--", linewidth=1, label="threshold")
+    end_s = t[-1] if len(t) else 0.0
+    waits = zip(trace.requests_s, [*trace.switches_s, end_s], trace.thresholds, strict=False)
+    for k, (request_s, until_s, threshold) in enumerate(waits):
+        if threshold is not None and np.isfinite(threshold):
+            ax_score.hlines(threshold, request_s, until_s, color="tab:blue", linestyle="--", linewidth=1,
+                            label="threshold" if k == 0 else None)
     ax_score.set_ylabel(f"{trace.strategy} score")
     phase_axis = ax_score.twinx()
     phase_axis.plot(t, trace.best_phase, ".", color="tab:orange", markersize=3, label="chosen φn")
@@ -57,16 +61,16 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     ax_feet.set_yticks(range(len(_FEET)), _FEET)
     ax_feet.set_xlabel("time (s)")
     for ax in (ax_score, ax_height, ax_feet):
-        ax.axvline(trace.request_s, color="tab:green", linestyle=":", linewidth=1.5)
-        if trace.switch_s is not None:
-            ax.axvline(trace.switch_s, color="tab:red", linewidth=1.5)
+        for request_s in trace.requests_s:
+            ax.axvline(request_s, color="tab:green", linestyle=":", linewidth=1.5)
+        for switch_s in trace.switches_s:
+            ax.axvline(switch_s, color="tab:red", linewidth=1.5)
         if trace.fell_s is not None:
             ax.axvline(trace.fell_s, color="tab:purple", linewidth=1.5)
-    outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s"
-    switched = "no switch" if trace.switch is None else f"switched at {trace.switch_s:.2f} s"
+    outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s (purple)"
     fig.suptitle(
-        f"{trace.source} → {trace.dest}, strategy {trace.strategy}, push {trace.push_n:g} N: "
-        f"request {trace.request_s:.2f} s (green), {switched} (red), {outcome}",
+        f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N: "
+        f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome}",
         fontsize=10,
     )
     fig.tight_layout()

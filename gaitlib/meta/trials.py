@@ -21,7 +21,8 @@ environment's (:class:`~gaitlib.envs.randomization.PushConfig`).
 
 With ``chain`` a world that stayed up goes on without a reset: the gait it now runs is the source of the next
 trial the schedule picks for it, switched after a uniform time in [0, ``source_extra_s``] (how a robot runs on the
-meta-controller, one gait after another; it saves the warm-up of most trials).
+meta-controller, one gait after another; it saves the warm-up of most trials), after ``push_lead_s`` more with the
+``request`` window (the next request's pushes begin that long before it, as for the first).
 """
 
 from __future__ import annotations
@@ -262,7 +263,7 @@ class SwitchTrials:
         chosen = (pairs >= 0).to(ids.device)
         ids = ids[chosen]
         self._pair[ids] = pairs[pairs >= 0].to(ids.device)
-        self._enter_source(ids, warmup=0)
+        self._enter_source(ids, warmup=self._lead if self._windowed else 0)
         if not self._windowed:
             self.env.enable_pushes(ids, True)
         return chosen
