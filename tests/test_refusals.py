@@ -43,7 +43,7 @@ PARSE_REFUSALS = [
     (["collect", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
     (["benchmark", "--workers", "0"], "--workers must be a whole number in [1, 4096], got 0"),
     (["collect", "--chunk", "0"], "--chunk must be a whole number in [1, 10000000], got 0"),
-    (["run", "--seconds", "inf"], "--seconds must be a finite number in (0, 600] s, got inf"),
+    (["run", "--hold", "inf"], "--hold must be a finite number in (0, 600] s, got inf"),
     (["run", "--push", "nan"], "--push must be a finite number in [0, 2000] N, got nan"),
     (["run", "--push", "-100"], "--push must be a finite number in [0, 2000] N, got -100"),
     (["eval", "stand", "--seconds", "nan"], "--seconds must be a finite number in (0, 600] s, got nan"),
@@ -134,7 +134,7 @@ def test_option_texts_that_name_nothing_are_refused(tmp_path) -> None:
     _refused(gaitlib_quick("benchmark", "--strategies", "random,random", "--out", str(tmp_path / "b")),
              "a strategy is given twice in random, random; give each once")
     _refused(gaitlib_quick("run", "--request-at", "nan", "--plot", str(tmp_path / "run.png")),
-             "--request-at must be a finite number in [0, --seconds) = [0, 6) s, got nan")
+             "--request-at must be a finite number in [0, 600] s, got nan")
     assert list(tmp_path.iterdir()) == []
 
 
