@@ -29,6 +29,7 @@ __all__ = [
     "MOTOR_STRENGTH",
     "PUSH_N",
     "SEED",
+    "TIME_IN_RUN",
     "WORKERS",
     "WORLDS",
     "WORLD_BYTES",
@@ -105,6 +106,8 @@ COUNT = Bounds(low=1, high=1e6, whole=True)
 """Iterations, epochs, samples per benchmark cell, checkpoint spacing."""
 EPISODE_SECONDS = Bounds(low=0, high=600, unit="s", low_open=True)
 """Simulated lengths of a run or an evaluation episode, s."""
+TIME_IN_RUN = Bounds(low=0, high=600, unit="s")
+"""Moments within a run, s from its start (0: at once)."""
 DELAY_STEPS = Bounds(low=0, high=10, whole=True)
 """Action delays, control steps (10: a third of a second at 30 Hz)."""
 MOTOR_STRENGTH = Bounds(low=0, high=10, low_open=True)
