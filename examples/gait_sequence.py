@@ -36,10 +36,9 @@ def main() -> None:
         )
     print(f"plot: {plot_trace(trace, args.plot)}")
     if args.video:
-        from gaitlib.meta.video import render_video
-        from gaitlib.robots import get_robot
+        from gaitlib.meta.video import render_trace
 
-        render_video(trace.qpos, args.video, fps=1.0 / trace.dt, model_xml=get_robot("a1").mjcf_path)
+        render_trace(trace, args.video)
         print(f"video: {args.video}")
     if not trace.stayed_up:
         raise SystemExit(f"the robot fell at {trace.fell_s:.2f} s")

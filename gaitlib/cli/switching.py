@@ -88,10 +88,9 @@ def run_command(
     )
     plot_trace(trace, plot)
     if video is not None:
-        from gaitlib.meta.video import render_video
-        from gaitlib.robots import get_robot
+        from gaitlib.meta.video import render_trace
 
-        render_video(trace.qpos, video, fps=1.0 / trace.dt, model_xml=get_robot("a1").mjcf_path)
+        render_trace(trace, video)
     switches = [
         {
             "from": setup.gaits[event.source],

@@ -19,7 +19,7 @@ import numpy as np
 from gaitlib.atomic import atomic_path
 from gaitlib.errors import GaitlibError
 
-__all__ = ["PLATFORMS", "render_video"]
+__all__ = ["PLATFORMS", "render_trace", "render_video"]
 
 PLATFORMS = ("egl", "osmesa")
 """Headless OpenGL platforms tried, in order, when ``MUJOCO_GL`` is not set."""
@@ -57,6 +57,13 @@ def render_video(qpos: np.ndarray, path: Path, *, fps: float, model_xml: Path) -
         "no headless OpenGL for --video (" + "; ".join(errors) + "); install EGL or OSMesa drivers "
         "(e.g. libegl1, libosmesa6) or set MUJOCO_GL"
     )
+
+
+def render_trace(trace, path: Path) -> Path:
+    """Render a :class:`~gaitlib.meta.episode.RunTrace` of the A1 into the video ``path``, in real time."""
+    from gaitlib.robots import get_robot
+
+    return render_video(trace.qpos, path, fps=1.0 / trace.dt, model_xml=get_robot("a1").mjcf_path)
 
 
 def _render(model_xml: str, frames: str, out: str, fps: float) -> None:
