@@ -43,8 +43,8 @@ def _run(setup, protocol: TrialProtocol, schedule_for):
 
 
 def test_the_collections_labels_are_the_benchmarks_random_verdicts() -> None:
-    setup = load_switching(None)  # the shipped library: about 70% of random trot-to-stand switches stay up
-    pair = (setup.gait_index("trot"), setup.gait_index("stand"))
+    setup = load_switching(None)  # the shipped library: about 80% of random trot-to-pace switches stay up
+    pair = (setup.gait_index("trot"), setup.gait_index("pace"))
     # One protocol for both (the collection's own pushes only while the source runs: at 0 N that changes no physics,
     # but its push timers draw from the environment's random stream at other moments).
     protocol = TrialProtocol(**TIMES)
@@ -52,11 +52,11 @@ def test_the_collections_labels_are_the_benchmarks_random_verdicts() -> None:
         setup, protocol,
         lambda ctl: ChunkSamples(ctl, [pair], np.array([TRIALS]), ctl.policies[0].latent_dim, seed=11),
     ).take()
-    judged = _run(setup, protocol, lambda ctl: _Verdicts([pair], [("trot", "stand")], TRIALS, lambda _: None))
+    judged = _run(setup, protocol, lambda ctl: _Verdicts([pair], [("trot", "pace")], TRIALS, lambda _: None))
     labels = collected.success.astype(bool).tolist()
     assert len(labels) == TRIALS and labels == judged.order  # trial by trial, not only the counts
     assert 0 < sum(labels) < TRIALS  # both outcomes occur, so the agreement is not a constant
-    cell = judged.cells[("trot", "stand")]
+    cell = judged.cells[("trot", "pace")]
     assert cell.samples == TRIALS and cell.successes == sum(labels) and cell.switched == TRIALS
     assert cell.forced == 0 and cell.wait_s == 0.0  # random switches at the request
     falls = collected.fall_after[~collected.success.astype(bool)]

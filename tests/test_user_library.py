@@ -103,6 +103,16 @@ def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> N
     assert sorted(p.name for p in mine.iterdir()) == listed  # no walk, no staging folder, no lock
 
 
+@pytest.mark.parametrize("folder", ["library", "library-paper"])
+def test_both_libraries_in_the_repository_are_whole(folder) -> None:
+    """The shipped library and the paper-recipe one it replaced: every gait's policy, every pair covered by
+    switching models fitted on these very policies (identities and checksums agree), nothing to fix."""
+    status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
+    pairs = {f"{m}-{n}" for m in ("pace", "stand", "trot") for n in ("pace", "stand", "trot") if m != n}
+    assert status["problems"] == [] and set(status["switching"]["pairs"]) == pairs
+    assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
+
+
 def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     switching_library, tmp_path, monkeypatch
 ) -> None:
