@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 import ray
-from cli_runner import gaitlib, gaitlib_quick
+from cli_runner import gaitlib_quick
 from conftest import copy_library
 from test_benchmark import TINY
 from test_transitions import GAITS, assert_same
@@ -31,10 +31,13 @@ SMALL = CollectConfig(
 
 def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> None:
     # Run first, before this process starts its own Ray: the command starts a local Ray for the run and stops it.
+    # In this process (``collect`` runs in a fresh one in test_cli_transitions.py): the interpreter's imports, not Ray.
     lib, data = str(tiny_library.root), str(tmp_path / "ray.h5")
     quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8"]
-    ran = gaitlib("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray", "--workers", "2")
+    ran = gaitlib_quick("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray",
+                        "--workers", "2")
     assert ran.returncode == 0, ran.stderr
+    assert not ray.is_initialized()  # the local Ray was stopped with the run
     plain = str(tmp_path / "plain.h5")
     assert gaitlib_quick("collect", "--samples", "24", "--out", plain, "--library", lib, *quick).returncode == 0
     assert_same(read(data).samples, read(plain).samples)

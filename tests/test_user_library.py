@@ -113,6 +113,20 @@ def test_both_libraries_in_the_repository_are_whole(folder) -> None:
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
 
 
+def test_the_gaits_grown_for_six_were_trained_from_the_shipped_policies() -> None:
+    """``library-six/`` holds the gaits a six-gait library adds (issue 26), trained alone before their switches are
+    collected: whole entries with nothing to fix, none of the shipped gaits, each trained from handover states of
+    the shipped library's policies as they are now (growth rewrote none of them)."""
+    status = json.loads(gaitlib_quick("library", "--library", str(REPO / "library-six"), "--json").stdout)
+    shipped = Library(REPO / "library")
+    assert status["problems"] == [] and status["switching"] is None
+    assert status["gaits"] and not set(status["gaits"]) & set(shipped.gaits())
+    for entry in status["gaits"].values():
+        start = entry["switch_start"]
+        assert start["share"] == 0.4 and start["from_gaits"] == list(shipped.gaits())
+        assert start["from_identities"] == {g: shipped.entry(g).identity for g in shipped.gaits()}
+
+
 def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     switching_library, tmp_path, monkeypatch
 ) -> None:
