@@ -31,7 +31,7 @@ SMALL = CollectConfig(
 
 def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> None:
     # Run first, before this process starts its own Ray: the command starts a local Ray for the run and stops it.
-    # In this process (``collect`` runs in a fresh one in test_cli_transitions.py): the interpreter's imports, not Ray.
+    # In this process, saving a fresh interpreter's imports (``collect`` runs in a fresh one in test_cli_transitions).
     lib, data = str(tiny_library.root), str(tmp_path / "ray.h5")
     quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8"]
     ran = gaitlib_quick("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray",
