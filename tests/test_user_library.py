@@ -115,11 +115,14 @@ def test_both_libraries_in_the_repository_are_whole(folder) -> None:
 
 def test_the_gaits_grown_for_six_were_trained_from_the_shipped_policies() -> None:
     """``library-six/`` holds the gaits a six-gait library adds (issue 26), trained alone before their switches are
-    collected: whole entries with nothing to fix, none of the shipped gaits, each trained from handover states of
-    the shipped library's policies as they are now (growth rewrote none of them)."""
+    collected: whole entries with nothing to fix but the switching models they wait for, none of the shipped gaits,
+    each trained from handover states of the shipped library's policies as they are now (growth rewrote none of
+    them)."""
     status = json.loads(gaitlib_quick("library", "--library", str(REPO / "library-six"), "--json").stdout)
     shipped = Library(REPO / "library")
-    assert status["problems"] == [] and status["switching"] is None
+    problems = [p["text"] for p in status["problems"]]
+    assert problems == (["no switching models yet (transition-net, TMT)"] if len(status["gaits"]) > 1 else [])
+    assert status["switching"] is None
     assert status["gaits"] and not set(status["gaits"]) & set(shipped.gaits())
     for entry in status["gaits"].values():
         start = entry["switch_start"]
