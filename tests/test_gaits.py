@@ -30,6 +30,7 @@ from gaitlib.gaits import (
     registry,
     save_motion_file,
     synthesis,
+    trunk_height,
     trunk_sway,
 )
 from gaitlib.robots.a1 import constants as c
@@ -170,6 +171,11 @@ def test_new_gait_from_a_toml_file(tmp_path, monkeypatch) -> None:
             "trunk_sway = 1\n[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.5\nRL = 0.0\n",
             "trunk_sway must be true or false",
         ),
+        (
+            "duty_factor = 0.5\nstride_frequency = 2.0\nforward_speed = 0.5\nswing_height = 0.06\nbody_height = 0.26\n"
+            "trunk_bounce = \"yes\"\n[phase_offsets]\nFR = 0.0\nFL = 0.5\nRR = 0.5\nRL = 0.0\n",
+            "trunk_bounce must be true or false",
+        ),
     ],
 )
 def test_malformed_gait_file_gives_a_one_line_error(tmp_path, text: str, problem: str) -> None:
@@ -212,9 +218,11 @@ def test_clip_is_periodic_and_inside_joint_limits(name: str) -> None:
     step = (phase[1] - phase[0]).item() * desc.period
     jumps = (frames.joint_pos[1:] - frames.joint_pos[:-1]).abs()
     assert (jumps <= step * frames.joint_vel.abs().max() * 1.05 + 1e-5).all()
-    # Interpolated joint velocities are the derivative of the interpolated joint angles.
+    # Interpolated joint velocities are the derivative of the interpolated joint angles, to within how much the
+    # velocity changes over one stored frame (the clip's velocities are central differences of its frames).
     derivative = (frames.joint_pos[2:] - frames.joint_pos[:-2]) / (2 * step)
-    assert (derivative - frames.joint_vel[1:-1]).abs().max() < 0.05 * max(1.0, frames.joint_vel.abs().max().item())
+    accel = ((frames.joint_vel[2:] - frames.joint_vel[:-2]) / (2 * step)).abs().max().item()
+    assert (derivative - frames.joint_vel[1:-1]).abs().max() <= clip.frame_duration * accel + 1e-6
 
 
 @pytest.mark.parametrize("name", ["trot", "pace", "bound", "walk", "pace-sway"])
@@ -287,6 +295,38 @@ def test_a_trot_sways_over_where_its_diagonal_line_runs() -> None:
     along = (0.183 + d / 2) / 0.366
     stance = contact_schedule(trot, np.array([1e-6]))
     assert synthesis._support_centre(trot, np.array([1e-6]), stance)[0] == pytest.approx(-b + along * 2 * b, abs=1e-4)
+
+
+def test_a_bouncing_trunk_falls_freely_in_flight_and_is_thrown_up_by_its_feet() -> None:
+    pronk = get_gait("pronk")
+    assert pronk.trunk_bounce and not any(get_gait(name).trunk_bounce for name in SHIPPED if name != "pronk")
+    # On the 512-point grid the height is integrated on: second differences are its vertical acceleration.
+    phase = np.arange(513) / 512
+    height = trunk_height(pronk, phase)
+    step = pronk.period / 512
+    accel = (height[2:] - 2 * height[1:-1] + height[:-2]) / step**2
+    inner = phase[1:-1]
+    flight = ~contact_schedule(pronk, inner).any(-1)
+    np.testing.assert_allclose(accel[flight], -9.81, rtol=0.02)  # free fall, all 60% of the cycle in the air
+    # In stance the four feet push together as one half-sine carrying the weight over the whole cycle: at
+    # mid-stance its peak, g pi / (2 duty), less gravity.
+    mid = np.argmin(abs(inner - pronk.duty_factor / 2))
+    assert accel[mid] == pytest.approx(9.81 * (math.pi / (2 * pronk.duty_factor) - 1), rel=0.02)
+    assert height[:-1].mean() == pytest.approx(pronk.body_height, abs=1e-9)
+    assert np.ptp(height) == pytest.approx(0.059, abs=0.001)
+    assert height.argmax() == pytest.approx(0.7 * 512, abs=2)  # the top of the flight, halfway through it
+    # Level without the option; a stand with it does not move (its feet never lift).
+    level = trunk_height(dataclasses.replace(pronk, trunk_bounce=False), phase)
+    assert (level == pronk.body_height).all()
+    assert (trunk_height(dataclasses.replace(get_gait("stand"), trunk_bounce=True), phase) == 0.26).all()
+    # The clip carries it: the trunk rises and falls, the stance feet stay on the ground, the swing lifts them
+    # swing_height above the ground (not the trunk).
+    frames = clip_from_description(pronk).frame(torch.from_numpy(phase[:-1]))
+    np.testing.assert_allclose(frames.root_pos[:, 2].numpy(), height[:-1], atol=5e-5)
+    feet_z = frames.foot_pos_world[..., 2].numpy()
+    stance = contact_schedule(pronk, phase[:-1])
+    np.testing.assert_allclose(feet_z[stance], c.FOOT_RADIUS, atol=5e-5)
+    assert feet_z.max() - c.FOOT_RADIUS == pytest.approx(pronk.swing_height, abs=1e-3)
 
 
 def test_trot_foot_positions_hand_computed() -> None:

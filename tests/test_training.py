@@ -191,7 +191,7 @@ def test_garbage_metadata_is_refused(trained, tmp_path) -> None:
 
 def test_eval_averages_over_the_steps_it_sums() -> None:
     """The trot's reference runs at a constant 1.45 m/s: over 30 steps the mean is that, not 29/30 of it (the step
-    that ends an episode counts for its length, not for the means)."""
+    that ends an episode counts for its length, not for the means); and its feet keep to its contact plan."""
     from gaitlib.envs import EnvConfig
     from gaitlib.library import Library
     from gaitlib.library.layout import shipped_library_dir
@@ -205,3 +205,10 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
     )
     assert trot.description.forward_speed == 1.45 and result.mean_episode_seconds == pytest.approx(1.0)
     assert result.reference_speed == pytest.approx(1.45, rel=1e-5)
+    # Its feet are mostly where the reference plans them (down in stance, up in swing); the stand's all but always.
+    stand = library.entry("stand")
+    standing = evaluate_policy(
+        stand.policy, stand.clip, env_cfg=library.shared_policy_settings(["stand"]).env_config(EnvConfig()),
+        episodes=2, seconds=1.0, backend="mujoco", seed=0,
+    )
+    assert standing.contact_agreement > 0.98 > result.contact_agreement > 0.8

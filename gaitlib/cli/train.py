@@ -247,6 +247,7 @@ def eval_command(
             ("heading lost (> 90 deg)", f"{result.heading_loss_rate:.3f}"),
             ("median |heading change| (deg)", f"{result.median_heading_change_deg:.1f}"),
             ("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}"),
+            ("feet in the reference's contact state", f"{result.contact_agreement:.3f}"),
             ("forward speed (m/s)", f"{result.forward_speed:.3f}"),
             ("reference speed (m/s)", f"{result.reference_speed:.3f}"),
             ("speed error", f"{result.speed_error:.3f}"),

@@ -21,7 +21,7 @@ from gaitlib.gaits.kinematics import (
 )
 from gaitlib.gaits.motion_file import load_motion_file, save_motion_file
 from gaitlib.gaits.registry import gait_names, get_gait, register_gait
-from gaitlib.gaits.synthesis import clip_from_description, contact_schedule, foot_trajectory, trunk_sway
+from gaitlib.gaits.synthesis import clip_from_description, contact_schedule, foot_trajectory, trunk_height, trunk_sway
 
 __all__ = [
     "ClipFrame",
@@ -40,5 +40,6 @@ __all__ = [
     "load_motion_file",
     "register_gait",
     "save_motion_file",
+    "trunk_height",
     "trunk_sway",
 ]

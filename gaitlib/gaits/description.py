@@ -11,6 +11,7 @@ A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :clas
     body_height = 0.26        # m
     foot_lateral_offset = 0.0 # m, optional
     trunk_sway = false        # optional: the trunk sways sideways over its stance feet
+    trunk_bounce = false      # optional: the trunk rises and falls as its feet push (needed for long flights)
 
     [phase_offsets]           # touchdown phase of each leg, cycles
     FR = 0.0
@@ -37,8 +38,8 @@ class GaitDescription:
     """A periodic gait of the A1, from which :func:`gaitlib.gaits.clip_from_description` builds a reference clip.
 
     Each foot is in stance for ``duty_factor`` of the cycle starting at its phase offset, then swings. The trunk
-    moves forward at constant speed and height with level orientation, straight or (``trunk_sway``) swaying
-    sideways over its stance feet.
+    moves forward at constant speed with level orientation, straight or (``trunk_sway``) swaying sideways over its
+    stance feet, at constant height or (``trunk_bounce``) rising and falling as its feet push.
     """
 
     name: str
@@ -65,6 +66,11 @@ class GaitDescription:
     (:func:`gaitlib.gaits.trunk_sway`), as a pacing animal does; false: the trunk runs straight. A gait whose
     stance feet are centred under the trunk at every phase (pronk, bound, stand) does not sway either way; a trot
     sways 1.4 cm (its diagonal support line lies to one side of the trunk at touchdown and lift-off)."""
+    trunk_bounce: bool = False
+    """Move the trunk up and down as the ground's push over the stance feet and gravity make it
+    (:func:`gaitlib.gaits.trunk_height`): it falls freely in flight and is thrown up again by its stance feet, its
+    mean height ``body_height``; false: it runs at ``body_height``. A level trunk cannot follow a long flight (the
+    pronk's 156 ms: ``docs/training.md``)."""
 
     def __post_init__(self) -> None:
         def fail(problem: str) -> GaitError:
@@ -93,8 +99,9 @@ class GaitDescription:
             if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0.0 <= offset < 1.0:
                 raise fail(f"phase offset of {leg} must be a number in [0, 1) cycles, got {offset!r}")
         object.__setattr__(self, "phase_offsets", tuple(float(o) for o in offsets))
-        if not isinstance(self.trunk_sway, bool):
-            raise fail(f"trunk_sway must be true or false, got {self.trunk_sway!r}")
+        for flag in ("trunk_sway", "trunk_bounce"):
+            if not isinstance(getattr(self, flag), bool):
+                raise fail(f"{flag} must be true or false, got {getattr(self, flag)!r}")
         if not 0.0 < self.duty_factor <= 1.0:
             raise fail(f"duty_factor must be in (0, 1], got {self.duty_factor}")
         if self.stride_frequency <= 0.0:
@@ -118,7 +125,7 @@ class GaitDescription:
 
 
 _SCALAR_KEYS = ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height")
-_OPTIONAL_KEYS = ("name", "foot_lateral_offset", "trunk_sway")
+_OPTIONAL_KEYS = ("name", "foot_lateral_offset", "trunk_sway", "trunk_bounce")
 
 
 def load_gait_file(path: str | Path) -> GaitDescription:
@@ -148,6 +155,7 @@ def load_gait_file(path: str | Path) -> GaitDescription:
             phase_offsets=tuple(offsets[leg] for leg in LEG_NAMES),
             foot_lateral_offset=table.get("foot_lateral_offset", 0.0),
             trunk_sway=table.get("trunk_sway", False),
+            trunk_bounce=table.get("trunk_bounce", False),
             **{key: table[key] for key in _SCALAR_KEYS},
         )
     except GaitError as error:

@@ -1,6 +1,7 @@
 """From a gait description to a reference clip: foot trajectories planned in the trunk frame, then leg IK.
 
-The trunk moves at ``forward_speed`` along x at ``body_height`` with level orientation. Each foot has a neutral
+The trunk moves at ``forward_speed`` along x with level orientation, at ``body_height`` or rising and falling
+about it (:func:`trunk_height`), straight or swaying (:func:`trunk_sway`). Each foot has a neutral
 point below its thigh joint (hip x, hip y plus thigh offset, shifted outward by ``foot_lateral_offset``) on the
 ground. Leg phase ``psi = (phase - phase_offset) mod 1``:
 
@@ -25,12 +26,13 @@ from gaitlib.gaits.description import GaitDescription
 from gaitlib.gaits.kinematics import forward_kinematics, inverse_kinematics
 from gaitlib.robots.a1.constants import FOOT_RADIUS, HIP_OFFSETS, JOINT_LOWER, JOINT_UPPER, THIGH_OFFSET_Y
 
-__all__ = ["clip_from_description", "contact_schedule", "foot_trajectory", "trunk_sway"]
+__all__ = ["clip_from_description", "contact_schedule", "foot_trajectory", "trunk_height", "trunk_sway"]
 
 _REACH_TOLERANCE = 1e-6  # m: IK solutions whose feet miss their targets by more than this are out of reach
 _GRAVITY = 9.81  # m/s^2: MuJoCo's default gravity, which the A1 model keeps
 _SWAY_SAMPLES = 512  # points per cycle at which the sway's periodic boundary problem is solved
 _CELL_SAMPLES = 8  # contact samples averaged over each of those points' cells
+_BOUNCE_SAMPLES = 512  # points per cycle at which the trunk's vertical motion is integrated
 
 
 def _leg_phase(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
@@ -108,6 +110,48 @@ def _sway_cycle(desc: GaitDescription) -> np.ndarray:
     return sway
 
 
+def trunk_height(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """Height of the trunk-frame origin above the ground, ``body_height`` unless ``desc.trunk_bounce``.
+
+    With the bounce, the trunk moves as a point mass under gravity and the ground's vertical push: each stance foot
+    pushes with a half-sine over its stance (the force of a spring-mass leg, Blickhan 1989, "The spring-mass model
+    for running and hopping", J. Biomech. 22), all pushes scaled so that over a cycle they carry the weight (the
+    impulse rule of Park, Wensing and Kim 2017, "High-speed bounding with the MIT Cheetah 2", IJRR 36(2)). The
+    acceleration ``g (push / mean push - 1)`` integrated twice over the cycle (its periodic solution, by Fourier
+    series on a 512-point grid), about a mean height of ``body_height``, is the bounce: in flight the trunk falls
+    freely; in stance it is caught and thrown up again. Around its 156 ms flights a pronk's trunk moves 5.9 cm from
+    lowest to highest; a stand, whose feet never lift and carry the weight evenly, does not move.
+
+    Args:
+        desc: the gait.
+        phase: (...) gait phase, cycles.
+
+    Returns:
+        (...) height, m.
+    """
+    phase = np.asarray(phase, dtype=np.float64)
+    if not desc.trunk_bounce or desc.duty_factor == 1.0:  # feet that never lift push evenly
+        return np.full_like(phase, desc.body_height)
+    bounce = _bounce_cycle(desc)
+    grid = np.arange(_BOUNCE_SAMPLES + 1) / _BOUNCE_SAMPLES
+    return desc.body_height + np.interp(np.mod(phase, 1.0), grid, np.append(bounce, bounce[0]))
+
+
+@functools.lru_cache(maxsize=32)
+def _bounce_cycle(desc: GaitDescription) -> np.ndarray:
+    """(512,) read-only height about ``body_height`` at phases 0, 1/512, ..., m (see :func:`trunk_height`)."""
+    psi = _leg_phase(desc, np.arange(_BOUNCE_SAMPLES) / _BOUNCE_SAMPLES)
+    push = np.where(psi < desc.duty_factor, np.sin(np.pi * psi / desc.duty_factor), 0.0).sum(-1)
+    accel = _GRAVITY * (push / push.mean() - 1.0)  # m/s^2, zero on average: the feet carry the weight
+    spectrum = np.fft.rfft(accel)
+    omega = 2.0 * np.pi * np.arange(len(spectrum)) / desc.period  # rad/s of each harmonic
+    height = np.zeros_like(spectrum)
+    height[1:] = -spectrum[1:] / omega[1:] ** 2  # z'' = a, harmonic by harmonic; the mean (harmonic 0) is 0
+    bounce = np.fft.irfft(height, n=_BOUNCE_SAMPLES)
+    bounce.setflags(write=False)
+    return bounce
+
+
 def _support_centre(desc: GaitDescription, phase: np.ndarray, stance: np.ndarray) -> np.ndarray:
     """(...) lateral point under the trunk the pendulum is balanced over, m: where the line between two stance feet
     runs at the trunk's x (a diagonal pair's line crosses under the trunk only at mid-stance; the trot's lies up to
@@ -157,7 +201,7 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     neutral = _neutral_feet(desc)
     x = np.where(in_stance, _stance_x(desc, phase), neutral[:, 0] + swing_x)
     y = neutral[:, 1] - trunk_sway(desc, phase)[..., None]
-    z = FOOT_RADIUS - desc.body_height + np.where(in_stance, 0.0, lift)
+    z = FOOT_RADIUS - trunk_height(desc, phase)[..., None] + np.where(in_stance, 0.0, lift)
     return np.stack([x, y, z], axis=-1)
 
 
@@ -185,7 +229,7 @@ def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -
     root_pos = np.zeros((intervals + 1, 3))
     root_pos[:, 0] = desc.stride_length * phase
     root_pos[:, 1] = trunk_sway(desc, phase)
-    root_pos[:, 2] = desc.body_height
+    root_pos[:, 2] = trunk_height(desc, phase)
     root_quat = np.zeros((intervals + 1, 4))
     root_quat[:, 0] = 1.0
     return ReferenceClip.from_frames(

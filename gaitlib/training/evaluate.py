@@ -34,6 +34,10 @@ class EvalResult:
     """Median over episodes of the absolute heading change from start to end (or to the fall), degrees."""
     joint_rmse: float
     """Root-mean-square joint angle error against the reference over all alive steps, rad."""
+    contact_agreement: float
+    """Share of feet over all alive steps whose ground contact is the reference's (down when it plans the foot in
+    stance, up when in swing), 0-1: a policy that lands out of step with its gait scores low even where its joints
+    follow (the first pronk: 0.45)."""
     forward_speed: float
     """Mean forward speed in the robot's heading frame over alive steps, m/s."""
     reference_speed: float
@@ -95,6 +99,7 @@ def evaluate_policy(
             heading_loss_rate=float(t["turned"].float().mean()),
             median_heading_change_deg=float(torch.rad2deg(t["heading_change"]).median()),
             joint_rmse=float(torch.sqrt(t["sq_error"].sum() / total_alive)),
+            contact_agreement=float(t["contact_agree"].sum() / total_alive),
             forward_speed=mean_speed,
             reference_speed=mean_ref,
             speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
@@ -109,12 +114,12 @@ def evaluate_policy(
 def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
     """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, turned (more than 90
     degrees from its start while up), alive steps (the episode's length), the steps summed over (those after which
-    the world was still up), summed squared joint error, forward and reference speed, and the last absolute heading
-    change while up, rad."""
+    the world was still up), summed squared joint error, share of feet in the reference's contact state, forward
+    and reference speed, and the last absolute heading change while up, rad."""
     n, dev = env.num_envs, env.device
     alive = torch.ones(n, dtype=torch.bool, device=dev)
     t = {"fell": torch.zeros(n, dtype=torch.bool, device=dev), "turned": torch.zeros(n, dtype=torch.bool, device=dev)}
-    names = ("alive_steps", "summed_steps", "sq_error", "speed", "ref_speed", "heading_change")
+    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
     t |= {k: torch.zeros(n, device=dev) for k in names}
     start_yaw = yaw_of(env.sim_state.root_quat)
     obs = env.get_observations()
@@ -131,6 +136,7 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         t["heading_change"] = torch.where(alive, change.abs(), t["heading_change"])
         t["turned"] |= alive & (change.abs() > torch.pi / 2)
         t["sq_error"] += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
+        t["contact_agree"] += live * (s.foot_contact.bool() == ref.contact).float().mean(-1)
         t["speed"] += live * quat_rotate_inverse(quat_from_yaw(yaw), s.root_lin_vel)[:, 0]
         t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
         t["summed_steps"] += live
