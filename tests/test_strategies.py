@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -201,6 +202,24 @@ def test_table_built_from_data_counts_outcomes_and_calibrates_thresholds(tmp_pat
     loaded = load_table(path, identities=IDENTITIES)
     assert np.array_equal(loaded.counts, table.counts) and loaded.thresholds == table.thresholds
     assert oct(path.stat().st_mode & 0o777) != oct(0o600)  # readable beside the library entries
+
+
+def test_a_pair_that_never_fails_is_always_switched_and_its_table_is_strict_json(tmp_path) -> None:
+    # Every stand -> trot switch succeeds, every trot -> stand one fails: thresholds -inf (switch at any score)
+    # and +inf (never), written as strings JSON can hold and read back as the same decisions.
+    data = synthetic_data()
+    data.samples.success[:] = (data.samples.source == 0).astype(np.uint8)
+    table = build_table(data, identities=IDENTITIES, source="synthetic")
+    assert table.thresholds["tmt"] == {(0, 1): -math.inf, (1, 0): math.inf}
+    path = save_table(tmp_path / "tmt.json", table)
+    strict = json.loads(path.read_text(), parse_constant=lambda name: pytest.fail(f"{name} is not JSON"))
+    assert strict["thresholds"]["tmt"] == {"stand-trot": "-inf", "trot-stand": "inf"}
+    loaded = load_table(path, identities=IDENTITIES)
+    assert loaded.thresholds == table.thresholds
+    trot_to_stand = query(1)
+    stand_to_trot = dataclasses.replace(trot_to_stand, source=trot_to_stand.dest, dest=trot_to_stand.source)
+    tmt = TMTStrategy(loaded)
+    assert tmt.decide(stand_to_trot).switch.item() and not tmt.decide(trot_to_stand).switch.item()
 
 
 def test_a_table_for_other_policies_or_a_foreign_file_is_refused(tmp_path) -> None:

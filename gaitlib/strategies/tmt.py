@@ -160,7 +160,8 @@ def save_table(path: Path, table: TransitionTable) -> Path:
         "counts": table.counts.tolist(),
         "typical_value": table.typical_value.tolist(),
         "thresholds": {
-            name: {f"{g[m]}-{g[n]}": t for (m, n), t in per_pair.items()} for name, per_pair in table.thresholds.items()
+            name: {f"{g[m]}-{g[n]}": _encode_threshold(t) for (m, n), t in per_pair.items()}
+            for name, per_pair in table.thresholds.items()
         },
         "info": table.info,
     }
@@ -207,8 +208,10 @@ def _from_payload(payload: dict) -> TransitionTable:
             raise ValueError(f"thresholds of pair '{text}', not of its gaits")
         return index[m], index[n]
 
-    thresholds = {name: {pair(p): float(t) for p, t in payload["thresholds"][name].items()} for name in CALIBRATED}
-    if not (np.isfinite(typical_value).all() and all(np.isfinite(list(t.values())).all() for t in thresholds.values())):
+    thresholds = {
+        name: {pair(p): _decode_threshold(t) for p, t in payload["thresholds"][name].items()} for name in CALIBRATED
+    }
+    if not np.isfinite(typical_value).all():
         raise ValueError("a threshold or typical value is not a finite number")
     return TransitionTable(
         gaits=gaits,
@@ -219,6 +222,26 @@ def _from_payload(payload: dict) -> TransitionTable:
         thresholds=thresholds,
         info=dict(payload["info"]),
     )
+
+
+_UNBOUNDED = {"-inf": float("-inf"), "inf": float("inf")}
+"""How ``tmt.json`` writes the thresholds of a pair whose samples all succeeded (switch at any score) or all
+failed (never): JSON has no infinities, so as these strings."""
+
+
+def _encode_threshold(threshold: float) -> float | str:
+    """A threshold as strict JSON: a finite number, or ``"-inf"`` / ``"inf"``."""
+    return float(threshold) if np.isfinite(threshold) else ("inf" if threshold > 0 else "-inf")
+
+
+def _decode_threshold(value: object) -> float:
+    """The threshold ``tmt.json`` holds as ``value``; ``ValueError`` unless a finite number, ``"-inf"`` or
+    ``"inf"``."""
+    if isinstance(value, str) and value in _UNBOUNDED:
+        return _UNBOUNDED[value]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise ValueError('a threshold or typical value is not a finite number (nor, for a threshold, "-inf" or "inf")')
+    return float(value)
 
 
 def _array(payload: dict, key: str, dtype) -> np.ndarray:
