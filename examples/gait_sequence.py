@@ -4,11 +4,13 @@ switch, and the strategy picks the moment. What ``gaitlib run --from trot --to s
 
     python examples/gait_sequence.py
     python examples/gait_sequence.py --strategy tmt --sequence trot,pace,stand --video sequence.mp4
+    python examples/gait_sequence.py --library library-six --sequence stand,walk,pace,bound,trot,pronk,stand
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.meta import load_switching
@@ -18,6 +20,7 @@ from gaitlib.meta.trace_plot import plot_trace
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--library", type=Path, default=None, help="default: $GAITLIB_LIBRARY or the shipped one")
     parser.add_argument("--sequence", default="trot,stand,pace,trot,stand")
     parser.add_argument("--strategy", default=DEFAULT_STRATEGY)
     parser.add_argument("--hold", type=float, default=2.5, help="time in a gait after its switch, s")
@@ -26,7 +29,7 @@ def main() -> None:
     args = parser.parse_args()
 
     first, *rest = args.sequence.split(",")
-    setup = load_switching(None)
+    setup = load_switching(args.library)
     trace = run_episode(setup, source=first, dests=rest, strategy=args.strategy, request_s=1.5, hold_s=args.hold)
     for request_s, event in zip(trace.requests_s, trace.switches, strict=False):
         how = "forced" if event.forced else f"score {event.score:.3f}"

@@ -93,6 +93,8 @@ def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library
     assert {p.name for p in out.iterdir()} >= {"results.json", "results.csv", "success.png", "matrix.png"}
     again = gaitlib_quick(*args)  # everything is done: it only reports
     assert again.returncode == 0 and "mean success over push magnitudes" in again.stdout
+    row = next(line for line in again.stdout.splitlines() if "stand-trot" in line and "│" in line)
+    assert len([cell for cell in row.split("│") if cell.strip()]) == 4, again.stdout  # the pair, three strategies
     margin = next(line for line in again.stdout.splitlines() if line.startswith("net-lookahead on stand-trot: vs"))
     assert "vs random" in margin and margin.endswith("percentage points (95%)"), again.stdout
 

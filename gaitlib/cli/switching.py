@@ -250,17 +250,16 @@ def _print_summary(facts: dict, out: Path, plot: Path) -> None:
     from gaitlib.cli.tables import table_console
 
     means = facts["mean_success"]
+    strategies = facts["ranking"]
     pairs = list(dict.fromkeys(p for per in means.values() for p in per))
     table = Table(title="mean success over push magnitudes")
-    table.add_column("strategy")
+    table.add_column("pair")
+    for strategy in strategies:
+        table.add_column(strategy, justify="right")
     for pair in pairs:
-        table.add_column(pair, justify="right")
-    table.add_column("all", justify="right")
-    for strategy in facts["ranking"]:
-        per = means[strategy]
-        table.add_row(
-            strategy, *(f"{per[p]:.3f}" if p in per else "-" for p in pairs), f"{facts['overall'][strategy]:.3f}"
-        )
+        table.add_row(pair, *(f"{means[s][pair]:.3f}" if pair in means[s] else "-" for s in strategies))
+    table.add_section()
+    table.add_row("all", *(f"{facts['overall'][s]:.3f}" for s in strategies))
     console = table_console()
     console.print(table)
     for strategy, per_pair in facts["margins"].items():

@@ -59,7 +59,8 @@ class FitReport:
     written: tuple[str, ...]
     """Files written, relative to the library."""
     uncovered: tuple[str, ...] = ()
-    """Ordered pairs (``"m-n"``) of the library's gaits that the fitted models do not cover (no samples)."""
+    """Ordered pairs (``"m-n"``) of the library's gaits that the fitted models do not cover: no samples (as
+    ``gaitlib library`` counts them; a pair whose samples all succeed is covered, with no accuracy to report)."""
     note: str | None = None
     """What reading the data left out or tolerated (samples of policies the library no longer holds), else
     ``None``."""
@@ -117,7 +118,8 @@ def fit_library(
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
     written = next(iter(results.values()))
-    covered = {f"{m}-{n}" for m, n in written.validation_accuracy}
+    names, samples = data.header.gaits, data.samples
+    covered = {f"{names[m]}-{names[n]}" for m, n in zip(samples.source.tolist(), samples.dest.tolist(), strict=True)}
     fitted = FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
