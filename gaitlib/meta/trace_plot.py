@@ -69,7 +69,7 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
             ax.axvline(trace.fell_s, color="tab:purple", linewidth=1.5)
     outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s (purple)"
     fig.suptitle(
-        f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N: "
+        f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N:\n"
         f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome}",
         fontsize=10,
     )
