@@ -85,7 +85,7 @@ def transition_maps(data: TransitionData, *, bins: int = 10) -> list[PairMap]:
     src_bin = np.minimum((s.phase_source * bins).astype(int), bins - 1)
     dst_bin = np.minimum((s.phase_dest * bins).astype(int), bins - 1)
     maps = []
-    for m, n in sorted({(int(a), int(b)) for a, b in zip(s.source, s.dest, strict=True)}):
+    for m, n in s.pairs():
         rows = (s.source == m) & (s.dest == n)
         ok = s.success[rows].astype(bool)
         sb, db = src_bin[rows], dst_bin[rows]

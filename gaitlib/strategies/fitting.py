@@ -118,8 +118,8 @@ def fit_library(
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
     written = next(iter(results.values()))
-    names, samples = data.header.gaits, data.samples
-    covered = {f"{names[m]}-{names[n]}" for m, n in zip(samples.source.tolist(), samples.dest.tolist(), strict=True)}
+    names = data.header.gaits
+    covered = {f"{names[m]}-{names[n]}" for m, n in data.samples.pairs()}
     fitted = FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),

@@ -130,7 +130,7 @@ def build_table(
         values = x.value_source[x.source == i]
         table.typical_value[i] = float(values.mean()) if len(values) else 1.0
     scores = sample_scores(table, data)
-    pairs = sorted(set(zip(x.source.tolist(), x.dest.tolist(), strict=True)))
+    pairs = x.pairs()
     for name in CALIBRATED:
         table.thresholds[name] = {}
         for m, n in pairs:

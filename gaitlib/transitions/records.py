@@ -77,6 +77,10 @@ class TransitionBatch:
     def __len__(self) -> int:
         return len(self.source)
 
+    def pairs(self) -> list[tuple[int, int]]:
+        """The ordered pairs (source, destination gait indices) that have samples, sorted."""
+        return sorted(set(zip(self.source.tolist(), self.dest.tolist(), strict=True)))
+
     def columns(self) -> dict[str, np.ndarray]:
         """Column name -> array, in :data:`COLUMNS` order."""
         return {name: getattr(self, name) for name in COLUMNS}
