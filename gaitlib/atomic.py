@@ -9,11 +9,14 @@ import fcntl
 import glob
 import hashlib
 import json
+import math
 import os
 import tempfile
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
+
+from gaitlib.errors import GaitlibError
 
 __all__ = [
     "CHECKSUM_KEY",
@@ -100,13 +103,33 @@ CHECKSUM_KEY = "checksum"
 
 
 def write_json(path: Path, payload: object, *, indent: int | None = 2, checksum: bool = False) -> Path:
-    """Write ``payload`` as JSON to ``path`` atomically; ``checksum``: with its :func:`json_checksum` added."""
+    """Write ``payload`` as JSON to ``path`` atomically; ``checksum``: with its :func:`json_checksum` added.
+
+    JSON has no nan or infinity (RFC 8259, section 6): a payload holding one is refused with a
+    :class:`~gaitlib.errors.GaitlibError` naming where, before anything is written (``path`` keeps what it held),
+    instead of a file that strict readers (``jq``, browsers) cannot parse."""
+    where = _non_finite(payload, "")
+    if where is not None:
+        raise GaitlibError(f"refusing to write {path}: {where or 'the value'} is not a finite number (JSON has none)")
     if checksum:
         payload = dict(payload) | {CHECKSUM_KEY: json_checksum(payload)}
     with atomic_path(path) as tmp, open(tmp, "w") as handle:
-        json.dump(payload, handle, indent=indent)
+        json.dump(payload, handle, indent=indent, allow_nan=False)
         handle.write("\n")
     return Path(path)
+
+
+def _non_finite(value: object, where: str) -> str | None:
+    """The key path (``a.b[2]``) of the first non-finite float in ``value``, ``None`` if there is none."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else where
+    if isinstance(value, Mapping):
+        found = (_non_finite(v, f"{where}.{k}" if where else str(k)) for k, v in value.items())
+    elif isinstance(value, (list, tuple)):
+        found = (_non_finite(v, f"{where}[{i}]") for i, v in enumerate(value))
+    else:
+        return None
+    return next((w for w in found if w is not None), None)
 
 
 def read_json(path: Path, *, header: Mapping[str, object], what: str, error: type[Exception]) -> dict:

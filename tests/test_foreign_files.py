@@ -13,7 +13,7 @@ from conftest import copy_library
 from test_benchmark import TINY
 from test_transitions import GAITS, QUICK
 
-from gaitlib.atomic import release_lock, take_lock, write_json
+from gaitlib.atomic import CHECKSUM_KEY, json_checksum, release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.collection import collect
 from gaitlib.errors import GaitlibError, TransitionDataError
@@ -43,11 +43,23 @@ def test_an_entry_holding_another_gaits_policy_is_refused(tmp_path) -> None:
 def test_a_nan_in_the_calibration_is_refused(switching_library, tmp_path) -> None:
     library = copy_library(Library(switching_library), tmp_path / "library")
     payload = json.loads(library.calibration_path.read_text())
-    payload["pairs"]["trot-stand"]["a"] = float("nan")  # as a fit gone wrong would write it, checksums and all
-    write_json(library.calibration_path, payload, checksum=True)
+    payload["pairs"]["trot-stand"]["a"] = float("nan")  # as another writer could leave it, checksums and all
+    payload[CHECKSUM_KEY] = json_checksum(payload)
+    library.calibration_path.write_text(json.dumps(payload))
     library.write_checksums(library.switching_dir)
     with pytest.raises(TransitionDataError, match=r"damaged net calibration .*not a finite number"):
         get_strategy("net-lookahead", SwitchResources(library=library, gaits=("stand", "trot")))
+
+
+def test_a_nan_is_refused_by_the_writer_and_the_old_file_kept(tmp_path) -> None:
+    path = write_json(tmp_path / "accuracy.json", {"latent": {"trot-stand": 0.8}}, checksum=True)
+    before = path.read_bytes()
+    for bad, where in (({"latent": {"trot-stand": float("nan")}}, "latent.trot-stand"),
+                       ({"rows": [[1, 0.5], [2, float("inf")]]}, r"rows\[1\]\[1\]")):
+        with pytest.raises(GaitlibError, match=rf"^refusing to write .*accuracy.json: {where} is not a finite number"):
+            write_json(path, bad, checksum=True)
+        assert path.read_bytes() == before
+    assert list(tmp_path.iterdir()) == [path]  # no temporary left either
 
 
 def test_a_second_benchmark_into_one_out_is_refused_and_a_killed_ones_leftover_removed(switching_library, tmp_path):

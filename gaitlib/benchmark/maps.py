@@ -10,14 +10,13 @@ the worst source bins say how much a strategy that only chooses the moment can g
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from gaitlib.atomic import atomic_path, save_figure
+from gaitlib.atomic import save_figure, write_json
 from gaitlib.benchmark.report import wilson_interval
 from gaitlib.envs import observations as obs_fn
 from gaitlib.robots.a1.constants import LEG_NAMES
@@ -128,9 +127,7 @@ def write_map_json(maps: list[PairMap], path: Path, *, source: str) -> Path:
         "fall_after_s_q99": fall_time_quantile(maps),
         "pairs": [asdict(m) for m in maps],
     }
-    with atomic_path(Path(path)) as tmp:
-        tmp.write_text(json.dumps(_plain(body), indent=1, allow_nan=False) + "\n")
-    return Path(path)
+    return write_json(path, _plain(body), indent=1)
 
 
 def _plain(value):
