@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
 import pytest
 
+from gaitlib.atomic import CHECKSUM_KEY, json_checksum
 from gaitlib.library import Library
 from gaitlib.sim import make_backend
 
@@ -71,6 +73,12 @@ def tiny_library(tmp_path_factory) -> Library:
             )
         )
     return Library(root / "library")
+
+
+def write_foreign_json(path: Path, payload: dict) -> None:
+    """Write ``payload`` with its matching checksum as another writer could: nan and infinities as Python's default
+    writer spells them, which gaitlib's own writer refuses (a reader must still refuse them)."""
+    path.write_text(json.dumps(payload | {CHECKSUM_KEY: json_checksum(payload)}))
 
 
 def copy_library(library: Library, folder: Path) -> Library:

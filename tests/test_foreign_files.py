@@ -9,11 +9,11 @@ import shutil
 
 import pytest
 from cli_runner import gaitlib_quick
-from conftest import copy_library
+from conftest import copy_library, write_foreign_json
 from test_benchmark import TINY
 from test_transitions import GAITS, QUICK
 
-from gaitlib.atomic import CHECKSUM_KEY, json_checksum, release_lock, take_lock, write_json
+from gaitlib.atomic import release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.collection import collect
 from gaitlib.errors import GaitlibError, TransitionDataError
@@ -44,8 +44,7 @@ def test_a_nan_in_the_calibration_is_refused(switching_library, tmp_path) -> Non
     library = copy_library(Library(switching_library), tmp_path / "library")
     payload = json.loads(library.calibration_path.read_text())
     payload["pairs"]["trot-stand"]["a"] = float("nan")  # as another writer could leave it, checksums and all
-    payload[CHECKSUM_KEY] = json_checksum(payload)
-    library.calibration_path.write_text(json.dumps(payload))
+    write_foreign_json(library.calibration_path, payload)
     library.write_checksums(library.switching_dir)
     with pytest.raises(TransitionDataError, match=r"damaged net calibration .*not a finite number"):
         get_strategy("net-lookahead", SwitchResources(library=library, gaits=("stand", "trot")))

@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import copy_library
+from conftest import copy_library, write_foreign_json
 
 from gaitlib.atomic import write_json
 from gaitlib.envs.observations import ObservationConfig
@@ -202,7 +202,7 @@ def test_an_entry_with_damaged_action_settings_gets_one_line(tiny_library, tmp_p
     path = library.root / "trot" / "metadata.json"
     meta = json.loads(path.read_text())
     change(meta)
-    write_json(path, meta, checksum=True)
+    write_foreign_json(path, meta)
     with pytest.raises(LibraryError, match=r"^library entry 'trot' has damaged metadata: 'action' needs .*, got "):
         library.entry("trot")
 

@@ -11,8 +11,8 @@ import sys
 import pytest
 import torch
 from cli_runner import gaitlib_quick
+from conftest import write_foreign_json
 
-from gaitlib.atomic import write_json
 from gaitlib.library import Library, default_library_dir
 from gaitlib.robots.a1.constants import JOINT_NAMES, MJCF_PATH
 
@@ -182,7 +182,7 @@ def test_a_damaged_tmt_is_one_line(shipped_copy, damage, why, tmp_path) -> None:
     original = path.read_text()
     tmt = json.loads(original)
     damage(tmt)
-    write_json(path, tmt, indent=None, checksum=True)  # as a foreign writer would: its own checksum matches
+    write_foreign_json(path, tmt)  # its own checksum matches
     shipped_copy.write_checksums(shipped_copy.switching_dir)
     try:
         result = _benchmark(shipped_copy, "tmt", tmp_path / "bench")
