@@ -24,6 +24,8 @@ __all__ = [
     "file_sha256",
     "fsync_folder",
     "json_checksum",
+    "json_text",
+    "null_for_nan",
     "read_json",
     "release_lock",
     "save_figure",
@@ -117,6 +119,28 @@ def write_json(path: Path, payload: object, *, indent: int | None = 2, checksum:
         json.dump(payload, handle, indent=indent, allow_nan=False)
         handle.write("\n")
     return Path(path)
+
+
+def json_text(payload: object) -> str:
+    """``payload`` as one line of strict JSON, what a command's ``--json`` prints: an undefined number (nan: an
+    empty cell's rate) as null (:func:`null_for_nan`), an infinity refused as :func:`write_json` refuses it."""
+    payload = null_for_nan(payload)
+    where = _non_finite(payload, "")
+    if where is not None:
+        raise GaitlibError(f"refusing to print JSON: {where or 'the value'} is not a finite number (JSON has none)")
+    return json.dumps(payload, allow_nan=False)
+
+
+def null_for_nan(value: object) -> object:
+    """``value`` with every nan float (an undefined number: an empty bin's or cell's rate) as ``None``, JSON's
+    null; mappings become dicts and sequences lists."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, Mapping):
+        return {key: null_for_nan(v) for key, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [null_for_nan(v) for v in value]
+    return value
 
 
 def _non_finite(value: object, where: str) -> str | None:

@@ -15,6 +15,15 @@ from cli_runner import gaitlib, gaitlib_quick
 SHIPPED = Path(__file__).resolve().parents[1] / "library"
 
 
+def _strict(text: str) -> dict:
+    """``text`` parsed as JSON that has no NaN or Infinity (RFC 8259; Python's reader would take them)."""
+
+    def refuse(constant: str):
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
 def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path) -> None:
     plot = tmp_path / "run.png"
     result = gaitlib(
@@ -22,7 +31,7 @@ def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path)
         "--plot", str(plot), "--library", str(switching_library), "--backend", "mujoco", "--json",
     )
     assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = _strict(result.stdout)
     assert report["from"] == "trot" and report["to"] == ["stand"] and report["strategy"] == "tmt"
     assert report["requests_s"] == [pytest.approx(0.5)] and len(report["switches"]) <= 1
     assert all(s["switch_s"] >= 0.5 - 1e-9 and (s["from"], s["to"]) == ("trot", "stand") for s in report["switches"])

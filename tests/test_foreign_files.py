@@ -13,7 +13,7 @@ from conftest import copy_library, write_foreign_json
 from test_benchmark import TINY
 from test_transitions import GAITS, QUICK
 
-from gaitlib.atomic import release_lock, take_lock, write_json
+from gaitlib.atomic import json_text, release_lock, take_lock, write_json
 from gaitlib.benchmark.sweep import run_sweep
 from gaitlib.collection import collect
 from gaitlib.errors import GaitlibError, TransitionDataError
@@ -59,6 +59,12 @@ def test_a_nan_is_refused_by_the_writer_and_the_old_file_kept(tmp_path) -> None:
             write_json(path, bad, checksum=True)
         assert path.read_bytes() == before
     assert list(tmp_path.iterdir()) == [path]  # no temporary left either
+
+
+def test_printed_json_writes_an_undefined_number_as_null_and_refuses_an_infinity() -> None:
+    assert json_text({"cell": {"rate": float("nan"), "rows": (1, 0.5)}}) == '{"cell": {"rate": null, "rows": [1, 0.5]}}'
+    with pytest.raises(GaitlibError, match=r"^refusing to print JSON: cell.rate is not a finite number"):
+        json_text({"cell": {"rate": float("inf")}})
 
 
 def test_a_second_benchmark_into_one_out_is_refused_and_a_killed_ones_leftover_removed(switching_library, tmp_path):

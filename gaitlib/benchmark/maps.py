@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gaitlib.atomic import save_figure, write_json
+from gaitlib.atomic import null_for_nan, save_figure, write_json
 from gaitlib.benchmark.report import wilson_interval
 from gaitlib.envs import observations as obs_fn
 from gaitlib.robots.a1.constants import LEG_NAMES
@@ -127,18 +127,7 @@ def write_map_json(maps: list[PairMap], path: Path, *, source: str) -> Path:
         "fall_after_s_q99": fall_time_quantile(maps),
         "pairs": [asdict(m) for m in maps],
     }
-    return write_json(path, _plain(body), indent=1)
-
-
-def _plain(value):
-    """``value`` with every nan float (an empty bin's rate) as ``None``: JSON has no nan."""
-    if isinstance(value, float) and math.isnan(value):
-        return None
-    if isinstance(value, dict):
-        return {key: _plain(v) for key, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value
+    return write_json(path, null_for_nan(body), indent=1)
 
 
 def write_map_plot(maps: list[PairMap], path: Path, *, title: str | None = None) -> Path:

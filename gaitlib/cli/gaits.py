@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
+
+from gaitlib.atomic import json_text
 
 __all__ = ["gaits_command"]
 
@@ -27,7 +28,7 @@ def gaits_command(
     checks = [(d, check_reference(clip_from_description(d))) for d in descriptions]
     if as_json:
         for d, check in checks:
-            print(json.dumps({"description": asdict(d), "check": asdict(check) | {"followable": check.followable}}))
+            print(json_text({"description": asdict(d), "check": asdict(check) | {"followable": check.followable}}))
         return
     from rich.table import Table
 

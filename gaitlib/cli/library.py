@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
+
+from gaitlib.atomic import json_text
 
 __all__ = ["library_command"]
 
@@ -28,7 +29,7 @@ def library_command(
         raise GaitlibError(f"no library at {lib.root}")
     status = library_status(lib)
     if as_json:
-        print(json.dumps(status.as_dict()))
+        print(json_text(status.as_dict()))
         return
     console = table_console()
     gaits = Table(title=f"{lib.root}{' (shipped with gaitlib)' if status.shipped else ''}: gaits")

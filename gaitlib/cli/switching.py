@@ -3,11 +3,11 @@ disturbance sweep of every strategy over every pair)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
 
+from gaitlib.atomic import json_text
 from gaitlib.cli.options import (
     COUNT,
     DELAY_STEPS,
@@ -116,7 +116,7 @@ def run_command(
         "video": None if video is None else str(video),
     }
     if as_json:
-        print(json.dumps(report))
+        print(json_text(report))
         return
     for switch in switches:
         how = "forced by the deadline" if switch["forced"] else f"score {switch['score']:.3f}"
@@ -229,7 +229,7 @@ def benchmark_command(
     write_matrix(out / "matrix.png", rows, title=title)
     facts = summary(rows)
     if as_json:
-        print(json.dumps({"success": success_table(rows), "summary": facts, "out": str(out)}))
+        print(json_text({"success": success_table(rows), "summary": facts, "out": str(out)}))
         return
     _print_summary(facts, out, plot)
 

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import typer
 
+from gaitlib.atomic import json_text
 from gaitlib.cli.options import CHUNK, MEASURE_SECONDS, PUSH_N, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
@@ -42,7 +42,7 @@ def sim(
     finally:
         sim_backend.close()
     if as_json:
-        print(json.dumps(result.as_dict()))
+        print(json_text(result.as_dict()))
         return
     print_measures(
         f"sim throughput: {result.backend} on {result.device}, {result.worlds} worlds",
@@ -80,7 +80,7 @@ def collect_throughput(
         Library(library), worlds=worlds, seconds=seconds, push_max=push_max, chunk=chunk, backend=backend
     )
     if as_json:
-        print(json.dumps(result.as_dict()))
+        print(json_text(result.as_dict()))
         return
     print_measures(
         f"collection throughput: {worlds} worlds, pushes up to {push_max:g} N",

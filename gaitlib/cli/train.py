@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import typer
 
+from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, DELAY_STEPS, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
 from gaitlib.cli.tables import print_measures
 
@@ -161,7 +161,7 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
     if plot is not None:
         write_push_plot({entry.name: points}, plot)
     if as_json:
-        print(json.dumps({"gait": entry.name, "points": [p.as_dict() for p in points]}))
+        print(json_text({"gait": entry.name, "points": [p.as_dict() for p in points]}))
         return
     from rich.table import Table
 
@@ -237,7 +237,7 @@ def eval_command(
         seed=seed,
     )
     if as_json:
-        print(json.dumps({"gait": gait} | result.as_dict()))
+        print(json_text({"gait": gait} | result.as_dict()))
         return
     print_measures(
         f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push_max:g} N, action "

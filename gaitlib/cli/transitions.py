@@ -3,12 +3,12 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import typer
 
+from gaitlib.atomic import json_text
 from gaitlib.cli.options import (
     CHUNK,
     COUNT,
@@ -195,7 +195,7 @@ def fit_command(
 
 def _report(report: dict, as_json: bool) -> None:
     if as_json:
-        print(json.dumps(report))
+        print(json_text(report))
         return
     from rich.table import Table
 
