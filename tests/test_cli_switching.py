@@ -39,6 +39,15 @@ def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path)
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_run_prints_random_s_switch_without_a_score(switching_library, tmp_path) -> None:
+    result = gaitlib(
+        "run", "--from", "trot", "--to", "stand", "--strategy", "random", "--request-at", "0.2", "--hold", "0.3",
+        "--plot", str(tmp_path / "run.png"), "--library", str(switching_library), "--backend", "mujoco",
+    )
+    assert result.returncode == 0, result.stderr
+    assert "switched at 0.20 s after waiting 0.00 s (random: no score, φn = " in result.stdout
+
+
 def _video_support() -> str | None:
     """Why a video cannot be rendered here (found independently of gaitlib), or ``None`` if it can."""
     if importlib.util.find_spec("imageio") is None:
@@ -65,8 +74,9 @@ def test_run_with_a_video_renders_it_or_says_in_one_line_why_not(switching_libra
         import imageio
 
         assert result.returncode == 0, result.stderr
-        frames = list(imageio.get_reader(video))
-        assert len(frames) == 15 and frames[0].shape == (480, 640, 3)  # 0.5 s at 30 Hz
+        reader = imageio.get_reader(video)
+        # Requested at 0.2 s (6 steps), switched in the 7th, held 0.3 s (9 steps) after it: 16 frames at 30 Hz.
+        assert reader.count_frames() == 16 and reader.get_data(0).shape == (480, 640, 3)
     else:
         lines = result.stderr.strip().splitlines()
         why = "pip install 'gaitlib[video]'" if missing == "imageio" else "no headless OpenGL"

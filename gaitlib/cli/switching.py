@@ -119,9 +119,10 @@ def run_command(
         print(json_text(report))
         return
     for switch in switches:
-        how = "forced by the deadline" if switch["forced"] else f"score {switch['score']:.3f}"
-        if switch["score"] is None:
-            how = "random: no score"
+        if switch["forced"]:
+            how = "forced by the deadline"
+        else:
+            how = "random: no score" if switch["score"] is None else f"score {switch['score']:.3f}"
         print(
             f"{switch['from']} -> {switch['to']}: requested at {switch['request_s']:.2f} s, switched at "
             f"{switch['switch_s']:.2f} s after waiting {switch['wait_s']:.2f} s ({how}, φn = {switch['phase']:.3f})"
