@@ -52,7 +52,7 @@ def test_the_collections_labels_are_the_benchmarks_random_verdicts() -> None:
         setup, protocol,
         lambda ctl: ChunkSamples(ctl, [pair], np.array([TRIALS]), ctl.policies[0].latent_dim, seed=11),
     ).take()
-    judged = _run(setup, protocol, lambda ctl: _Verdicts([pair], [("trot", "pace")], TRIALS, lambda _: None))
+    judged = _run(setup, protocol, lambda ctl: _Verdicts([[pair]], [("trot", "pace")], TRIALS, lambda _: None))
     labels = collected.success.astype(bool).tolist()
     assert len(labels) == TRIALS and labels == judged.order  # trial by trial, not only the counts
     assert 0 < sum(labels) < TRIALS  # both outcomes occur, so the agreement is not a constant

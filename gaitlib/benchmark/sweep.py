@@ -18,6 +18,7 @@ way.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -87,6 +88,10 @@ class SweepConfig:
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
     """Base seed; each magnitude derives its own from it (the same for every strategy)."""
+    routes: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    """``"m-n"`` -> the gaits (m, ..., n) a transition of that pair switches through, each switch with the group's
+    strategy, one after the other on the same robot (:mod:`gaitlib.benchmark.routes`); the other pairs switch
+    directly."""
 
     def __post_init__(self) -> None:
         if self.samples < 1 or self.num_worlds < 1:
@@ -113,6 +118,9 @@ class SweepConfig:
             raise GaitlibError(
                 "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
             )
+        for pair, path in self.routes.items():
+            if len(path) < 2 or f"{path[0]}-{path[-1]}" != pair or any(a == b for a, b in itertools.pairwise(path)):
+                raise GaitlibError(f"the route {' -> '.join(path)} does not lead from one gait to another as {pair}")
         self.backend_name()  # newton under a gap that needs mujoco: one line now
 
     def backend_name(self) -> str:
@@ -122,7 +130,7 @@ class SweepConfig:
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        for name in ("backend", "device", "gap", "protocol"):
+        for name in ("backend", "device", "gap", "protocol") + (() if self.routes else ("routes",)):
             fixed.pop(name)
         protocol = asdict(self.protocol)
         for name in ("push_window", "chain"):  # always the request window, never chained
@@ -274,23 +282,37 @@ def _run_group(
         pushes = cfg.protocol.pushes(magnitude, fixed=True)
         env = cfg.gap.make_env(setup, sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
         controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed)
-        cells = CellSchedule([(setup.gait_index(m), setup.gait_index(n)) for m, n in pairs], pairs, cfg.samples, report)
-        SwitchTrials(controller, cfg.protocol, cells, seed=seed).run()
+        routes = [cfg.routes.get(f"{m}-{n}", (m, n)) for m, n in pairs]
+        legs = [[(setup.gait_index(a), setup.gait_index(b)) for a, b in itertools.pairwise(r)] for r in routes]
+        cells = CellSchedule(legs, pairs, cfg.samples, report)
+        protocol = dataclasses.replace(cfg.protocol, chain=bool(cfg.routes))  # a route's legs on one robot
+        SwitchTrials(controller, protocol, cells, seed=seed).run()
         return cells.cells
     finally:
         sim.close()
 
 
 class CellSchedule(TrialSchedule):
-    """The sweep's schedule: ``samples`` trials of each pair, each new one of the least-started pair; counts
-    outcomes per cell."""
+    """The sweep's schedule: ``samples`` transitions of each pair, each new one of the least-started pair; counts
+    outcomes per cell. A pair's transition is its route: one switch, or several chained on the same robot
+    (``routes[i]``, the legs of pair i as gait indices); it succeeds when every leg does, and a fall anywhere, between
+    legs included, fails it. The engine's pairs (:attr:`pairs`) are the legs of every route, in order."""
 
-    def __init__(self, pairs: list[tuple[int, int]], names: Sequence[tuple[str, str]], samples: int,
+    def __init__(self, routes: list[list[tuple[int, int]]], names: Sequence[tuple[str, str]], samples: int,
                  report: Callable[[int], None]) -> None:
-        self.pairs, self.names, self.samples, self.report = pairs, list(names), samples, report
+        self.names, self.samples, self.report = list(names), samples, report
+        self.pairs = [leg for legs in routes for leg in legs]
+        self._cell = [i for i, legs in enumerate(routes) for _ in legs]  # leg -> its pair
+        self._first = list(itertools.accumulate((len(legs) for legs in routes[:-1]), initial=0))
+        self._next = [i + 1 if i + 1 < len(self.pairs) and self._cell[i + 1] == c else -1
+                      for i, c in enumerate(self._cell)]
         self.cells = {pair: CellCounts() for pair in self.names}
-        self.started = [0] * len(pairs)  # trials begun (finished or under way) per pair
+        self.started = [0] * len(routes)  # transitions begun (finished or under way) per pair
         self.ended = 0
+        self._going_on: dict[int, int] = {}  # world -> the leg it goes on with, after a leg that stayed up
+
+    def _counts(self, leg: int) -> CellCounts:
+        return self.cells[self.names[self._cell[leg]]]
 
     def begin(self, k: int) -> torch.Tensor:
         chosen = []
@@ -301,24 +323,40 @@ class CellSchedule(TrialSchedule):
                 continue
             pair = min(open_pairs, key=lambda i: self.started[i])
             self.started[pair] += 1
-            chosen.append(pair)
+            chosen.append(self._first[pair])
         return torch.tensor(chosen, dtype=torch.long)
 
     def switched(self, pair: int, event: SwitchEvent) -> None:
-        cell = self.cells[self.names[pair]]
+        cell = self._counts(pair)
         cell.switched += 1
         cell.forced += int(event.forced)
         cell.wait_s += event.wait_s
 
-    def source_fell(self, pairs: torch.Tensor) -> bool:
-        for pair in pairs.tolist():
-            self.cells[self.names[pair]].source_falls += 1
-        return True
+    def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+        again = [leg == self._first[self._cell[leg]] for leg in pairs.tolist()]
+        for leg, first in zip(pairs.tolist(), again, strict=True):
+            if first:  # before the transition's first request: run it again, uncounted
+                self._counts(leg).source_falls += 1
+            else:  # in the gait between two legs: the transition failed
+                self._count(leg, False)
+        if not all(again):
+            self.report(self.ended)
+        return torch.tensor(again, dtype=torch.bool)
 
     def finished(self, outcome: TrialOutcome) -> None:
-        for pair, ok in zip(outcome.pair.tolist(), outcome.success.tolist(), strict=True):
-            cell = self.cells[self.names[pair]]
-            cell.samples += 1
-            cell.successes += int(ok)
-        self.ended += len(outcome.pair)
+        for world, leg, ok in zip(outcome.world.tolist(), outcome.pair.tolist(), outcome.success.tolist(),
+                                  strict=True):
+            if ok and self._next[leg] >= 0:
+                self._going_on[world] = self._next[leg]
+            else:
+                self._count(leg, ok)
         self.report(self.ended)
+
+    def chain(self, worlds: torch.Tensor, gaits: torch.Tensor) -> torch.Tensor:
+        return torch.tensor([self._going_on.pop(w, -1) for w in worlds.tolist()], dtype=torch.long)
+
+    def _count(self, leg: int, success: bool) -> None:
+        cell = self._counts(leg)
+        cell.samples += 1
+        cell.successes += int(success)
+        self.ended += 1

@@ -29,6 +29,7 @@ app.command("states")(transitions.states_command)
 app.command("map")(transitions.map_command)
 app.command("benchmark")(switching.benchmark_command)
 app.command("run")(switching.run_command)
+app.command("routes")(switching.routes_command)
 app.add_typer(throughput.app, name="throughput")
 
 

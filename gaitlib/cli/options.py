@@ -118,6 +118,8 @@ WORKERS = Bounds(low=1, high=4096, whole=True)
 """Ray workers of one job (each a process with its own simulator)."""
 IMPULSE_NS = Bounds(low=0, high=200, unit="N s")
 """Impulses of a single push (200 N s: 16 m/s of speed change for the A1, beyond anything it survives)."""
+LEGS = Bounds(low=1, high=5, whole=True)
+"""Switches a route may take (``gaitlib routes --max-legs``)."""
 CHUNK = Bounds(low=1, high=1e7, whole=True)
 """Samples per chunk of a collection (its unit of work and of a commit)."""
 

@@ -1,5 +1,5 @@
-"""``gaitlib run`` (one robot, requested switches, with a plot and a video) and ``gaitlib benchmark`` (the
-disturbance sweep of every strategy over every pair)."""
+"""``gaitlib run`` (one robot, requested switches, with a plot and a video), ``gaitlib benchmark`` (the
+disturbance sweep of every strategy over every pair) and ``gaitlib routes`` (the library's route table)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from gaitlib.cli.options import (
     COUNT,
     DELAY_STEPS,
     EPISODE_SECONDS,
+    LEGS,
     MAX_MAGNITUDES,
     MOTOR_STRENGTH,
     PUSH_N,
@@ -25,7 +26,7 @@ from gaitlib.cli.options import (
 )
 from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 
-__all__ = ["benchmark_command", "run_command"]
+__all__ = ["benchmark_command", "routes_command", "run_command", "sweep_with_progress"]
 
 
 def run_command(
@@ -59,6 +60,8 @@ def run_command(
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    routed: bool = typer.Option(False, "--routed", help="Make each switch through another gait where the library's "
+                                "route table (gaitlib routes) measured that better."),
 ) -> None:
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
     with --strategy."""
@@ -74,6 +77,11 @@ def run_command(
     if video is not None:
         check_out_file("--video", video)
     setup = load_switching(library)
+    asked = sequence
+    if routed:
+        from gaitlib.benchmark.routes import load_routes
+
+        sequence = list(load_routes(setup.resources.library, setup.gaits).expand(source, tuple(sequence)))
     trace = run_episode(
         setup,
         source=source,
@@ -107,6 +115,7 @@ def run_command(
     report = {
         "from": source,
         "to": sequence,
+        "asked": asked,
         "strategy": strategy,
         "requests_s": trace.requests_s,
         "switches": switches,
@@ -127,6 +136,8 @@ def run_command(
             f"{switch['from']} -> {switch['to']}: requested at {switch['request_s']:.2f} s, switched at "
             f"{switch['switch_s']:.2f} s after waiting {switch['wait_s']:.2f} s ({how}, φn = {switch['phase']:.3f})"
         )
+    if sequence != asked:
+        print(f"routed: {' -> '.join((source, *asked))} through {' -> '.join((source, *sequence))}")
     outcome = "stayed up" if trace.stayed_up else f"FELL at {trace.fell_s:.2f} s"
     print(f"{' -> '.join((source, *sequence))} with {strategy}: {len(switches)} of {len(sequence)} switch(es) made; "
           f"the robot {outcome}")
@@ -163,14 +174,15 @@ def benchmark_command(
         1.0, "--motor-strength", help="Multiple of the PD torque the motors deliver, kp, kd and torque limit alike "
         "(mujoco backend);", bounds=MOTOR_STRENGTH,
     ),
+    routed: bool = typer.Option(False, "--routed", help="Each transition follows the library's route table "
+                                "(gaitlib routes): through another gait where that measured better, counted once."),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),
     workers: int | None = workers_option(),
 ) -> None:
     """Success rate of each switching strategy on each ordered pair under pushes (paper Fig. 4): CSV, JSON, plot.
-    With --robot, --action-delay, --motor-strength: on a stand-in for the real robot (Fig. 4, bottom)."""
-    from rich.console import Console
-
+    With --robot, --action-delay, --motor-strength: on a stand-in for the real robot (Fig. 4, bottom). With
+    --routed: each pair along its route, every switch of it with the strategy."""
     from gaitlib.benchmark.gap import DeploymentGap
     from gaitlib.benchmark.report import (
         cell_results,
@@ -180,9 +192,8 @@ def benchmark_command(
         write_matrix,
         write_plot,
     )
-    from gaitlib.benchmark.sweep import SweepConfig, run_sweep
+    from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds, cluster_config, parse_magnitudes, parse_pairs
-    from gaitlib.cli.progress import job_progress
     from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
@@ -198,6 +209,11 @@ def benchmark_command(
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
+    detours = {}
+    if routed:
+        from gaitlib.benchmark.routes import load_routes
+
+        detours = load_routes(setup.resources.library, setup.gaits).detours()
     config = SweepConfig(
         strategies=names,
         magnitudes=swept,
@@ -207,20 +223,9 @@ def benchmark_command(
         gap=gap,
         backend=backend,
         seed=seed,
+        routes=detours,
     )
-    console = Console(stderr=True)
-    with job_progress(console, "benchmark") as progress:
-        task = progress.add_task("benchmark", total=None, status="starting")
-
-        last = [""]
-
-        def show(group: str, done: int, total: int) -> None:
-            progress.update(task, completed=done, total=total, status=group)
-            if not console.is_terminal and group != last[0]:  # logs get a line per group
-                console.print(f"{done}/{total} transitions, now {group}")
-                last[0] = group
-
-        results = run_sweep(out, setup, config, progress=show, cluster=cluster)
+    results = sweep_with_progress(out, setup, config, cluster=cluster)
     rows = cell_results(results)
     if not rows:
         raise GaitlibError("the benchmark produced no results")
@@ -233,6 +238,76 @@ def benchmark_command(
         print(json_text({"success": success_table(rows), "summary": facts, "out": str(out)}))
         return
     _print_summary(facts, out, plot)
+
+
+def routes_command(
+    samples: int = bounded(1000, "--samples", help="Transitions per ordered pair, at 0 N;", bounds=COUNT),
+    strategy: str = typer.Option(DEFAULT_STRATEGY, "--strategy", help="The strategy every switch is made with."),
+    max_legs: int = bounded(2, "--max-legs", help="Most switches a route may take;", bounds=LEGS),
+    out: Path | None = typer.Option(
+        None, "--out", help="Benchmark folder the pairs are measured into, resumed (default: runs/routes-LIBRARY)."
+    ),
+    worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (the route table)."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+) -> None:
+    """Measure every ordered pair at 0 N with --strategy and write the library's route table
+    (switching/routes.json): the pairs that do better through another gait, for run and benchmark --routed."""
+    from gaitlib.benchmark.routes import routes_from_results
+    from gaitlib.benchmark.sweep import SweepConfig
+    from gaitlib.cli.options import check_worlds
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies import get_strategy
+
+    check_worlds("--worlds", worlds, backend=backend)
+    setup = load_switching(library)
+    get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work
+    lib = setup.resources.library
+    out = out or Path("runs") / f"routes-{lib.root.resolve().name}"
+    config = SweepConfig(strategies=(strategy,), magnitudes=(0.0,), samples=samples, num_worlds=worlds,
+                         backend=backend, seed=seed)
+    results = sweep_with_progress(out, setup, config)
+    table = routes_from_results(results, lib, strategy=strategy, max_legs=max_legs)
+    path = table.save(lib)
+    if as_json:
+        print(json_text(table.as_dict() | {"out": str(path)}))
+        return
+    from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
+
+    shown = Table(title=f"{strategy} at 0 N, {samples} transitions a pair: routes through another gait")
+    for column in ("pair", "direct", "route", "predicted"):
+        shown.add_column(column, justify="left" if column in ("pair", "route") else "right")
+    for pair, path_ in table.detours().items():
+        shown.add_row(pair, f"{table.success(path_[0], path_[-1]):.3f}", " -> ".join(path_),
+                      f"{table.predicted(path_):.3f}")
+    console = table_console()
+    console.print(shown if table.detours() else "every pair switches best directly")
+    console.print(f"route table: {path}; measured in {out}")
+
+
+def sweep_with_progress(out: Path, setup, config, *, cluster=None) -> dict:
+    """:func:`~gaitlib.benchmark.sweep.run_sweep` with a progress bar on stderr (a line per group in logs)."""
+    from rich.console import Console
+
+    from gaitlib.benchmark.sweep import run_sweep
+    from gaitlib.cli.progress import job_progress
+
+    console = Console(stderr=True)
+    with job_progress(console, "benchmark") as progress:
+        task = progress.add_task("benchmark", total=None, status="starting")
+        last = [""]
+
+        def show(group: str, done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total, status=group)
+            if not console.is_terminal and group != last[0]:  # logs get a line per group
+                console.print(f"{done}/{total} transitions, now {group}")
+                last[0] = group
+
+        return run_sweep(out, setup, config, progress=show, cluster=cluster)
 
 
 def _gap_title(gap) -> str:

@@ -187,7 +187,7 @@ class ChunkSamples(TrialSchedule):
         chosen = torch.cat([chosen, torch.full((k - len(chosen),), -1, dtype=torch.long)])
         return chosen[torch.randperm(k, generator=self._gen)]
 
-    def chain(self, gaits: torch.Tensor) -> torch.Tensor:
+    def chain(self, worlds: torch.Tensor, gaits: torch.Tensor) -> torch.Tensor:
         """(k,) for worlds now running ``gaits``: the least-begun open pair starting from that gait, unless it is
         more than a batch of worlds ahead of the least-begun open pair (-1: reset instead)."""
         candidates = self._pair_source.unsqueeze(0) == gaits.unsqueeze(1)  # (k, P)
@@ -205,9 +205,9 @@ class ChunkSamples(TrialSchedule):
                 chosen[row] = pair
         return chosen
 
-    def source_fell(self, pairs: torch.Tensor) -> bool:
+    def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
         self.source_falls += len(pairs)
-        return True  # the same pair again, so the pairs of the samples stay uniform however often a source falls
+        return torch.ones(len(pairs), dtype=torch.bool)  # the same pair again: the samples' pairs stay uniform
 
     def record(self, switch: SwitchDetail) -> None:
         """What the switch of worlds ``switch.world`` found (before any policy acts on it)."""

@@ -161,14 +161,14 @@ class _Sequence(TrialSchedule):
             pairs[0], self._next = 0, 1
         return pairs
 
-    def chain(self, gaits: torch.Tensor) -> torch.Tensor:
+    def chain(self, worlds: torch.Tensor, gaits: torch.Tensor) -> torch.Tensor:
         pairs = torch.full((len(gaits),), -1, dtype=torch.long)
         if self._next < len(self.pairs):
             pairs[0], self._next = self._next, self._next + 1
         return pairs
 
-    def source_fell(self, pairs: torch.Tensor) -> bool:
-        return False
+    def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(len(pairs), dtype=torch.bool)  # the robot is down: no new trial begins
 
     def finished(self, outcome: TrialOutcome) -> None:
         pass  # the trace is the outcome

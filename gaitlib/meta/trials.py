@@ -6,7 +6,8 @@ A trial, per world, all worlds at once (per-world state machines held as tensors
 1. reset with the source gait m of the pair the schedule picks (reference state initialization, fresh Table 1
    randomization);
 2. the meta-controller runs m for ``warmup_s`` plus a uniform extra time in [0, ``source_extra_s``]; a fall here
-   is a *source fall*: the schedule decides whether the world starts again at 1 with the same pair;
+   is a *source fall*: the schedule decides whether the world starts again at 1 with the same pair or takes
+   another;
 3. the switch to n is requested; the controller's strategy switches when it says so (``random``: at once, at a
    uniform destination phase), or the request is forced after ``deadline_s``;
 4. the verdict: success if the robot does not fall from the request until ``horizon_s`` after the end of the
@@ -125,13 +126,15 @@ class TrialSchedule(ABC):
     def finished(self, outcome: TrialOutcome) -> None:
         """Take the outcomes of trials that ended."""
 
-    def chain(self, gaits: torch.Tensor) -> torch.Tensor:
-        """(k,) pairs of trials chained onto k worlds now running ``gaits``, -1 where a world is reset instead."""
+    def chain(self, worlds: torch.Tensor, gaits: torch.Tensor) -> torch.Tensor:
+        """(k,) pairs of trials chained onto ``worlds`` (k, that stayed up) now running ``gaits``, -1 where a world
+        is reset instead."""
         return torch.full((len(gaits),), -1, dtype=torch.long)
 
-    def source_fell(self, pairs: torch.Tensor) -> bool:
-        """Sources of trials of ``pairs`` fell before the request; True: start those trials again."""
-        return True
+    def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+        """The sources of ``worlds``' trials of ``pairs`` fell before the request; (k,) bool: True where that trial
+        starts again, False where the world takes a new one (:meth:`begin`)."""
+        return torch.ones(len(pairs), dtype=torch.bool)
 
     def switched(self, pair: int, event: SwitchEvent) -> None:  # noqa: B027 (optional hook)
         """A trial of ``pair`` switched."""
@@ -221,10 +224,9 @@ class SwitchTrials:
             self._finish(ended.nonzero().squeeze(1), fell)
         if source_fell.any():
             ids = source_fell.nonzero().squeeze(1)
-            if self.schedule.source_fell(self._pair[ids]):
-                self._start_source(ids)
-            else:
-                self._idle(ids)
+            again = self.schedule.source_fell(ids.cpu(), self._pair[ids].cpu()).to(ids.device)
+            self._start_source(ids[again])
+            self._begin(ids[~again])
         if ended.any():
             ids = ended.nonzero().squeeze(1)
             self.ctl.cancel(ids)
@@ -259,7 +261,7 @@ class SwitchTrials:
         mask of those chained."""
         pairs = torch.full((len(ids),), -1, dtype=torch.long)
         if ok.any():
-            pairs[ok.cpu()] = self.schedule.chain(self.env.gait[ids[ok]].cpu())
+            pairs[ok.cpu()] = self.schedule.chain(ids[ok].cpu(), self.env.gait[ids[ok]].cpu())
         chosen = (pairs >= 0).to(ids.device)
         ids = ids[chosen]
         self._pair[ids] = pairs[pairs >= 0].to(ids.device)

@@ -1,0 +1,104 @@
+"""Routes: the planner's choice, the route table's checks against the library, and a routed transition on the real
+simulator counted once, a success only when every leg is."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from cli_runner import gaitlib
+from conftest import copy_library
+
+from gaitlib.benchmark.routes import ROUTES_FILE, RouteTable, load_routes
+from gaitlib.benchmark.sweep import CellSchedule
+from gaitlib.envs import EnvConfig
+from gaitlib.errors import GaitlibError
+from gaitlib.library.store import Library
+from gaitlib.meta import SwitchTrials, TrialOutcome, TrialProtocol, load_switching
+from gaitlib.sim import make_backend
+
+GAITS = ("pace", "stand", "trot")
+
+
+def _table(rates: dict[str, tuple[int, int]], **fields) -> RouteTable:
+    every = {f"{m}-{n}": (1000, 1000) for m in GAITS for n in GAITS if m != n} | rates
+    return RouteTable(gaits=GAITS, strategy="net-lookahead", rates=every, policies={}, switching="", measured_with={},
+                      **fields)
+
+
+def test_a_detour_is_taken_only_where_it_beats_the_direct_switch_beyond_its_interval() -> None:
+    table = _table({"trot-pace": (850, 1000), "trot-stand": (995, 1000), "stand-pace": (990, 1000)})
+    assert table.route("trot", "pace") == ("stand", "pace")  # 0.985 predicted against 0.850 [0.826, 0.871]
+    assert table.predicted(("trot", "stand", "pace")) == pytest.approx(0.995 * 0.990)
+    assert table.expand("stand", ("trot", "pace", "stand")) == ("trot", "stand", "pace", "stand")
+    assert table.detours() == {"trot-pace": ("trot", "stand", "pace")}
+    assert _table({"trot-pace": (850, 1000)}, max_legs=1).route("trot", "pace") == ("pace",)
+    close = _table({"trot-pace": (980, 1000), "trot-stand": (995, 1000), "stand-pace": (990, 1000)})
+    assert close.route("trot", "pace") == ("pace",)  # 0.985 predicted, below 0.988: 980 of 1000's upper bound
+    with pytest.raises(GaitlibError, match="lacks the pairs"):
+        RouteTable(gaits=GAITS, strategy="x", rates={}, policies={}, switching="", measured_with={})
+
+
+def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_stale(switching_library, tmp_path):
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    measured = gaitlib("routes", "--samples", "2", "--worlds", "4", "--backend", "mujoco", "--library",
+                       str(library.root), "--out", str(tmp_path / "bench"), "--json")
+    assert measured.returncode == 0, measured.stderr
+    written = json.loads(measured.stdout)
+    assert set(written["rates"]) == {"stand-trot", "trot-stand"} and written["detours"] == {}  # two gaits: direct
+    assert all(n == 2 for _, n in written["rates"].values())
+    table = load_routes(library, ("stand", "trot"))
+    assert table.route("trot", "stand") == ("stand",)
+
+    accuracy = library.accuracy_path
+    accuracy.write_text(accuracy.read_text() + " ")  # as a refit would: other switching models, checksums and all
+    library.write_checksums(library.switching_dir)
+    with pytest.raises(GaitlibError, match=r"other switching models.*gaitlib routes --library"):
+        load_routes(library, ("stand", "trot"))
+    ran = gaitlib("run", "--routed", "--library", str(library.root), "--plot", str(tmp_path / "r.png"))
+    assert ran.returncode == 2 and "other switching models" in ran.stderr.strip().splitlines()[0]
+    (library.switching_dir / ROUTES_FILE).unlink()
+    with pytest.raises(GaitlibError, match="has no route table"):
+        load_routes(library, ("stand", "trot"))
+
+
+class _Legs(CellSchedule):
+    """The benchmark's schedule, each leg's outcome and each fall between legs kept."""
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.legs: list[tuple[int, bool]] = []
+        self.between = 0
+
+    def finished(self, outcome: TrialOutcome) -> None:
+        super().finished(outcome)
+        self.legs += list(zip(outcome.pair.tolist(), outcome.success.tolist(), strict=True))
+
+    def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+        again = super().source_fell(worlds, pairs)
+        self.between += int((~again).sum())
+        return again
+
+
+def test_a_routed_transition_is_one_trial_that_succeeds_only_when_every_leg_does() -> None:
+    setup = load_switching(None)  # the shipped library: trot, pace, stand
+    trot, pace, stand = (setup.gait_index(g) for g in ("trot", "pace", "stand"))
+    trials = 12
+    schedule = _Legs([[(trot, stand), (stand, pace)], [(pace, trot)]], [("trot", "pace"), ("pace", "trot")], trials,
+                     lambda _: None)
+    protocol = TrialProtocol(warmup_s=0.7, source_extra_s=0.5, horizon_s=1.0, deadline_s=1.0, chain=True)
+    sim = make_backend("mujoco", num_worlds=4)
+    try:
+        env = setup.make_env(sim, EnvConfig(episode_seconds=1e6), seed=3)
+        controller = setup.controller(env, "random", deadline_s=protocol.deadline_s, seed=5)
+        SwitchTrials(controller, protocol, schedule, seed=7).run()
+    finally:
+        sim.close()
+    routed, direct = schedule.cells[("trot", "pace")], schedule.cells[("pace", "trot")]
+    first = [ok for leg, ok in schedule.legs if leg == 0]
+    second = [ok for leg, ok in schedule.legs if leg == 1]
+    assert routed.samples == direct.samples == trials and len(first) == trials  # one count per transition
+    assert len(second) + schedule.between == sum(first)  # only a first leg that stayed up goes on
+    assert routed.successes == sum(second) and direct.successes == sum(ok for leg, ok in schedule.legs if leg == 2)
+    assert routed.switched == len(first) + len(second)  # random switches at each request: one switch a leg run
