@@ -3,15 +3,16 @@ simulator counted once, a success only when every leg is."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 import torch
-from cli_runner import gaitlib
+from cli_runner import gaitlib, gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.benchmark.routes import ROUTES_FILE, RouteTable, load_routes
-from gaitlib.benchmark.sweep import CellSchedule
+from gaitlib.benchmark.sweep import CellSchedule, SweepConfig, run_sweep
 from gaitlib.envs import EnvConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.library.store import Library
@@ -50,12 +51,16 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
     assert all(n == 2 for _, n in written["rates"].values())
     table = load_routes(library, ("stand", "trot"))
     assert table.route("trot", "stand") == ("stand",)
+    shown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)["routes"]
+    assert shown == {"state": "current", "strategy": "net-lookahead", "detours": {}}
 
     accuracy = library.accuracy_path
     accuracy.write_text(accuracy.read_text() + " ")  # as a refit would: other switching models, checksums and all
     library.write_checksums(library.switching_dir)
     with pytest.raises(GaitlibError, match=r"other switching models.*gaitlib routes --library"):
         load_routes(library, ("stand", "trot"))
+    shown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)["routes"]
+    assert shown["state"] == "stale" and "other switching models" in shown["why"]
     ran = gaitlib("run", "--routed", "--library", str(library.root), "--plot", str(tmp_path / "r.png"))
     assert ran.returncode == 2 and "other switching models" in ran.stderr.strip().splitlines()[0]
     (library.switching_dir / ROUTES_FILE).unlink()
@@ -102,3 +107,19 @@ def test_a_routed_transition_is_one_trial_that_succeeds_only_when_every_leg_does
     assert len(second) + schedule.between == sum(first)  # only a first leg that stayed up goes on
     assert routed.successes == sum(second) and direct.successes == sum(ok for leg, ok in schedule.legs if leg == 2)
     assert routed.switched == len(first) + len(second)  # random switches at each request: one switch a leg run
+
+
+def test_a_routed_sweep_records_its_routes_and_resumes_only_with_them(tmp_path) -> None:
+    setup = load_switching(None)
+    protocol = TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2)
+    config = SweepConfig(strategies=("random",), magnitudes=(0.0,), samples=3, pairs=(("trot", "pace"),),
+                         num_worlds=2, protocol=protocol, backend="mujoco",
+                         routes={"trot-pace": ("trot", "stand", "pace")})
+    results = run_sweep(tmp_path / "bench", setup, config)
+    cell = results["groups"]["random@0"]["cells"]["trot-pace"]
+    assert cell["samples"] == 3 and 3 <= cell["switched"] <= 6  # a first switch each, a second after each that held
+    assert results["settings"]["routes"] == {"trot-pace": ["trot", "stand", "pace"]}
+    with pytest.raises(GaitlibError, match=r"other settings \(routes\)"):
+        run_sweep(tmp_path / "bench", setup, dataclasses.replace(config, routes={}))
+    with pytest.raises(GaitlibError, match="does not lead from one gait to another as trot-pace"):
+        dataclasses.replace(config, routes={"trot-pace": ("trot", "stand")})

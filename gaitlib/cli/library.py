@@ -28,8 +28,9 @@ def library_command(
     if not lib.root.is_dir():
         raise GaitlibError(f"no library at {lib.root}")
     status = library_status(lib)
+    routes = _routes(lib, status)
     if as_json:
-        print(json_text(status.as_dict()))
+        print(json_text(status.as_dict() | {"routes": routes}))
         return
     console = table_console()
     gaits = Table(title=f"{lib.root}{' (shipped with gaitlib)' if status.shipped else ''}: gaits")
@@ -57,12 +58,33 @@ def library_command(
             pairs.add_row(pair, state, "-" if samples is None else f"{samples:,}",
                           "-" if accuracy is None or state != "covered" else f"{100 * accuracy:.1f}%")
         console.print(pairs)
+    if routes is not None and routes["state"] == "current":
+        detours = "; ".join(f"{pair} through {' -> '.join(path)}" for pair, path in routes["detours"].items())
+        console.print(f"route table ({routes['strategy']}): {detours or 'every pair best directly'}", soft_wrap=True)
+    elif routes is not None:
+        console.print(f"problem: {escape(routes['why'])}", soft_wrap=True)
     if not status.problems:
         console.print("nothing stale: every gait is usable and every pair is covered")
     for problem in status.problems:
         console.print(f"problem: {escape(problem.text)}", soft_wrap=True)
         for command in problem.commands:
             console.print(f"  fix: {escape(command)}", soft_wrap=True)
+
+
+def _routes(lib, status) -> dict | None:
+    """The library's route table (``gaitlib routes``): ``None`` without one, else its state, and its detours when
+    it is current."""
+    from gaitlib.benchmark.routes import ROUTES_FILE, load_routes
+    from gaitlib.errors import GaitlibError
+
+    if status.bundle is None or not (lib.switching_dir / ROUTES_FILE).is_file():
+        return None
+    try:
+        table = load_routes(lib, status.bundle.gaits)
+    except GaitlibError as stale:
+        return {"state": "stale", "why": str(stale)}
+    detours = {pair: list(path) for pair, path in table.detours().items()}
+    return {"state": "current", "strategy": table.strategy, "detours": detours}
 
 
 def _num(value: float | None, digits: int) -> str:
