@@ -123,3 +123,46 @@ def test_a_routed_sweep_records_its_routes_and_resumes_only_with_them(tmp_path) 
         run_sweep(tmp_path / "bench", setup, dataclasses.replace(config, routes={}))
     with pytest.raises(GaitlibError, match="does not lead from one gait to another as trot-pace"):
         dataclasses.replace(config, routes={"trot-pace": ("trot", "stand")})
+
+
+def _outcome(world: int, leg: int, success: bool) -> TrialOutcome:
+    return TrialOutcome(world=torch.tensor([world]), pair=torch.tensor([leg]), success=torch.tensor([success]),
+                        fall_after_s=torch.tensor([torch.inf if success else 0.5]), max_push=torch.zeros(1))
+
+
+def test_a_fall_between_the_legs_fails_the_routed_transition_once_and_the_world_takes_another() -> None:
+    trot, pace, stand = 2, 0, 1
+    schedule = CellSchedule([[(trot, stand), (stand, pace)], [(pace, trot)]], [("trot", "pace"), ("pace", "trot")],
+                            2, lambda _: None)
+    assert schedule.pairs == [(trot, stand), (stand, pace), (pace, trot)]  # the engine's pairs: every leg
+    assert schedule.begin(3).tolist() == [0, 2, 0]  # each transition starts with its first leg
+    schedule.finished(_outcome(0, 0, True))  # world 0's first leg stayed up: it goes on in the stand
+    assert schedule.chain(torch.tensor([0]), torch.tensor([stand])).tolist() == [1]
+    assert schedule.source_fell(torch.tensor([0]), torch.tensor([1])).tolist() == [False]  # fell in the stand
+    assert schedule.source_fell(torch.tensor([2]), torch.tensor([0])).tolist() == [True]  # before the first request
+    schedule.finished(_outcome(1, 2, True))
+    assert schedule.chain(torch.tensor([1]), torch.tensor([trot])).tolist() == [-1]  # a direct pair: reset
+    routed, direct = schedule.cells[("trot", "pace")], schedule.cells[("pace", "trot")]
+    assert (routed.samples, routed.successes, routed.source_falls) == (1, 0, 1) and schedule.ended == 2
+    assert (direct.samples, direct.successes) == (1, 1)
+
+
+def test_a_source_fall_the_schedule_does_not_restart_gives_the_world_a_new_trial() -> None:
+    class Abandoning(CellSchedule):
+        def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+            self.abandoned = getattr(self, "abandoned", 0) + len(pairs)
+            return torch.zeros(len(pairs), dtype=torch.bool)
+
+    setup = load_switching(None)
+    trot, stand = setup.gait_index("trot"), setup.gait_index("stand")
+    schedule = Abandoning([[(trot, stand)]], [("trot", "stand")], 12, lambda _: None)
+    protocol = TrialProtocol(warmup_s=0.7, source_extra_s=0.5, horizon_s=0.5, deadline_s=0.3)
+    sim = make_backend("mujoco", num_worlds=4)
+    try:  # pushes that fell many sources before their request
+        env = setup.make_env(sim, EnvConfig(episode_seconds=1e6, pushes=protocol.pushes(400.0, fixed=True)), seed=3)
+        controller = setup.controller(env, "random", deadline_s=protocol.deadline_s, seed=5)
+        SwitchTrials(controller, protocol, schedule, seed=7).run()
+    finally:
+        sim.close()
+    cell = schedule.cells[("trot", "stand")]
+    assert schedule.abandoned > 0 and cell.samples + schedule.abandoned == 12  # each begun trial ends one way

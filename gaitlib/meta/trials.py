@@ -225,7 +225,8 @@ class SwitchTrials:
         if source_fell.any():
             ids = source_fell.nonzero().squeeze(1)
             again = self.schedule.source_fell(ids.cpu(), self._pair[ids].cpu()).to(ids.device)
-            self._start_source(ids[again])
+            if again.any():
+                self._start_source(ids[again])
             self._begin(ids[~again])
         if ended.any():
             ids = ended.nonzero().squeeze(1)
