@@ -5,6 +5,7 @@ switch, and the strategy picks the moment. What ``gaitlib run --from trot --to s
     python examples/gait_sequence.py
     python examples/gait_sequence.py --strategy tmt --sequence trot,pace,stand --video sequence.mp4
     python examples/gait_sequence.py --library library-six --sequence stand,walk,pace,bound,trot,pronk,stand
+    python examples/gait_sequence.py --library library-six --sequence trot,pace --routed   # trot, stand, pace
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gaitlib.benchmark.routes import load_routes
 from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.meta import load_switching
 from gaitlib.meta.episode import run_episode
@@ -26,13 +28,16 @@ def main() -> None:
     parser.add_argument("--hold", type=float, default=2.5, help="time in a gait after its switch, s")
     parser.add_argument("--plot", default="sequence.png")
     parser.add_argument("--video", default=None, help="also render an MP4 (pip install -e '.[video]')")
+    parser.add_argument("--routed", action="store_true", help="through other gaits where the route table says")
     args = parser.parse_args()
 
     first, *rest = args.sequence.split(",")
     setup = load_switching(args.library)
+    if args.routed:  # the library's route table, measured by `gaitlib routes`
+        rest = load_routes(setup.resources.library, setup.gaits).expand(first, tuple(rest))
     trace = run_episode(setup, source=first, dests=rest, strategy=args.strategy, request_s=1.5, hold_s=args.hold)
     for request_s, event in zip(trace.requests_s, trace.switches, strict=False):
-        how = "forced" if event.forced else f"score {event.score:.3f}"
+        how = "forced" if event.forced else "random" if event.score != event.score else f"score {event.score:.3f}"
         print(
             f"{request_s:6.2f} s  request {setup.gaits[event.dest]}; switched from {setup.gaits[event.source]} at "
             f"{event.step * trace.dt:.2f} s, phase {event.phase:.2f} ({how})"

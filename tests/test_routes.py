@@ -52,7 +52,7 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
     table = load_routes(library, ("stand", "trot"))
     assert table.route("trot", "stand") == ("stand",)
     shown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)["routes"]
-    assert shown == {"state": "current", "strategy": "net-lookahead", "detours": {}}
+    assert shown == {"state": "current", "strategy": "net-lookahead", "push_n": 0.0, "detours": {}}
 
     accuracy = library.accuracy_path
     accuracy.write_text(accuracy.read_text() + " ")  # as a refit would: other switching models, checksums and all
@@ -66,6 +66,16 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
     (library.switching_dir / ROUTES_FILE).unlink()
     with pytest.raises(GaitlibError, match="has no route table"):
         load_routes(library, ("stand", "trot"))
+
+
+def test_run_routed_follows_the_shipped_route_table(tmp_path) -> None:
+    ran = gaitlib("run", "--from", "trot", "--to", "pace", "--routed", "--request-at", "0.3", "--hold", "0.7",
+                  "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--json")
+    assert ran.returncode == 0, ran.stderr
+    report = json.loads(ran.stdout)
+    assert report["asked"] == ["pace"] and report["to"] == ["stand", "pace"]  # library/switching/routes.json
+    assert [(s["from"], s["to"]) for s in report["switches"]] in ([("trot", "stand"), ("stand", "pace")],
+                                                                   [("trot", "stand")])  # a fall ends the run
 
 
 class _Legs(CellSchedule):

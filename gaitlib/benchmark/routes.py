@@ -1,11 +1,12 @@
-"""Routes: a switch that the library does badly directly, made through another gait instead (trot -> walk -> pace).
+"""Routes: a switch that the library does badly directly, made through another gait instead (trot -> stand -> pace).
 
 A library's route table (``switching/routes.json``) holds the measured success of every ordered pair with one
-strategy at 0 N (a benchmark group: :func:`routes_from_results`). A route's predicted success is the product of its
-legs' measured rates (each switch starts from a robot that has run the intermediate gait for a while, as the
-measured ones did). The planner takes the route of at most ``max_legs`` switches with the highest predicted
-success, and only where that exceeds the direct switch's upper 95% bound (Wilson), so that a detour, which costs a
-switch and seconds, is not taken on noise; everywhere else the switch is direct.
+strategy at one push magnitude (a benchmark group: :func:`routes_from_results`; 0 N by default), the magnitude the
+routes are for: a routed transition meets the pushes of each of its requests. A route's predicted success is the
+product of its legs' measured rates (each switch starts from a robot that has run the intermediate gait for a
+while, as the measured ones did). The planner takes the route of at most ``max_legs`` switches with the highest
+predicted success, and only where that exceeds the direct switch's upper 95% bound (Wilson), so that a detour,
+which costs a switch and seconds, is not taken on noise; everywhere else the switch is direct.
 
 The table records the policies and the switching models it was measured with; a refit replaces the switching folder
 and so removes it, and a table for other policies or models is refused in one line (:func:`load_routes`).
@@ -33,11 +34,14 @@ _FORMAT = {"format": "gaitlib.routes", "format_version": 1}
 
 @dataclass(frozen=True, kw_only=True)
 class RouteTable:
-    """Measured success of every ordered pair of ``gaits`` with ``strategy`` at 0 N, and the routes it implies."""
+    """Measured success of every ordered pair of ``gaits`` with ``strategy`` at ``push_n``, and the routes it
+    implies."""
 
     gaits: tuple[str, ...]
     strategy: str
     """The strategy every switch of a route is made with (``gaitlib benchmark --strategies``)."""
+    push_n: float = 0.0
+    """Push magnitude the pairs were measured at, N (the benchmark's push window around each request)."""
     rates: dict[str, tuple[int, int]]
     """``"m-n"`` -> (successes, transitions) measured."""
     max_legs: int = 2
@@ -100,7 +104,7 @@ class RouteTable:
 
     def as_dict(self) -> dict:
         return _FORMAT | {
-            "gaits": list(self.gaits), "strategy": self.strategy, "max_legs": self.max_legs,
+            "gaits": list(self.gaits), "strategy": self.strategy, "push_n": self.push_n, "max_legs": self.max_legs,
             "rates": {pair: list(r) for pair, r in self.rates.items()}, "policies": self.policies,
             "switching": self.switching, "measured_with": self.measured_with,
             "detours": {pair: list(path) for pair, path in self.detours().items()},  # for readers: derived
@@ -111,18 +115,20 @@ class RouteTable:
         return write_json(library.switching_dir / ROUTES_FILE, self.as_dict(), checksum=True)
 
 
-def routes_from_results(results: dict, library: Library, *, strategy: str, max_legs: int = 2) -> RouteTable:
+def routes_from_results(results: dict, library: Library, *, strategy: str, push_n: float = 0.0,
+                        max_legs: int = 2) -> RouteTable:
     """The route table of ``library`` from a benchmark's results (``gaitlib benchmark``'s ``results.json``) holding
-    every ordered pair of its gaits with ``strategy`` at 0 N, run on the library's current policies."""
-    group = results["groups"].get(group_key(strategy, 0.0))
+    every ordered pair of its gaits with ``strategy`` at ``push_n`` N, run on the library's current policies."""
+    group = results["groups"].get(group_key(strategy, push_n))
     if group is None:
-        raise GaitlibError(f"the benchmark has no group of '{strategy}' at 0 N to measure routes with")
+        raise GaitlibError(f"the benchmark has no group of '{strategy}' at {push_n:g} N to measure routes with")
     identities = results["library_identities"]
     library.check_identities(identities, what="the benchmark results")
     library.check_switching()
     return RouteTable(
         gaits=library.order(identities),
         strategy=strategy,
+        push_n=push_n,
         rates={pair: (c["successes"], c["samples"]) for pair, c in group["cells"].items()},
         max_legs=max_legs,
         policies=dict(identities),
@@ -147,7 +153,7 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
     if set(saved.get("gaits", ())) != set(gaits) or saved.get("policies") != library.identities(gaits):
         raise GaitlibError(f"{path} was measured with other policies than the library's{again}")
     return RouteTable(
-        gaits=tuple(saved["gaits"]), strategy=saved["strategy"], max_legs=saved["max_legs"],
+        gaits=tuple(saved["gaits"]), strategy=saved["strategy"], push_n=saved["push_n"], max_legs=saved["max_legs"],
         rates={pair: (int(r[0]), int(r[1])) for pair, r in saved["rates"].items()}, policies=saved["policies"],
         switching=saved["switching"], measured_with=saved["measured_with"],
     )

@@ -60,7 +60,8 @@ def library_command(
         console.print(pairs)
     if routes is not None and routes["state"] == "current":
         detours = "; ".join(f"{pair} through {' -> '.join(path)}" for pair, path in routes["detours"].items())
-        console.print(f"route table ({routes['strategy']}): {detours or 'every pair best directly'}", soft_wrap=True)
+        console.print(f"route table ({routes['strategy']}, {routes['push_n']:g} N): "
+                      f"{detours or 'every pair best directly'}", soft_wrap=True)
     elif routes is not None:
         console.print(f"problem: {escape(routes['why'])}", soft_wrap=True)
     if not status.problems:
@@ -84,7 +85,7 @@ def _routes(lib, status) -> dict | None:
     except GaitlibError as stale:
         return {"state": "stale", "why": str(stale)}
     detours = {pair: list(path) for pair, path in table.detours().items()}
-    return {"state": "current", "strategy": table.strategy, "detours": detours}
+    return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours}
 
 
 def _num(value: float | None, digits: int) -> str:

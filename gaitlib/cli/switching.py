@@ -241,8 +241,10 @@ def benchmark_command(
 
 
 def routes_command(
-    samples: int = bounded(1000, "--samples", help="Transitions per ordered pair, at 0 N;", bounds=COUNT),
+    samples: int = bounded(1000, "--samples", help="Transitions per ordered pair;", bounds=COUNT),
     strategy: str = typer.Option(DEFAULT_STRATEGY, "--strategy", help="The strategy every switch is made with."),
+    push: float = bounded(0.0, "--push", help="Push magnitude the routes are for, in the benchmark's window around "
+                          "each request;", bounds=PUSH_N),
     max_legs: int = bounded(2, "--max-legs", help="Most switches a route may take;", bounds=LEGS),
     out: Path | None = typer.Option(
         None, "--out", help="Benchmark folder the pairs are measured into, resumed (default: runs/routes-LIBRARY)."
@@ -253,7 +255,7 @@ def routes_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (the route table)."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
-    """Measure every ordered pair at 0 N with --strategy and write the library's route table
+    """Measure every ordered pair with --strategy (at --push, default 0 N) and write the library's route table
     (switching/routes.json): the pairs that do better through another gait, for run and benchmark --routed."""
     from gaitlib.benchmark.routes import routes_from_results
     from gaitlib.benchmark.sweep import SweepConfig
@@ -266,10 +268,10 @@ def routes_command(
     get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work
     lib = setup.resources.library
     out = out or Path("runs") / f"routes-{lib.root.resolve().name}"
-    config = SweepConfig(strategies=(strategy,), magnitudes=(0.0,), samples=samples, num_worlds=worlds,
+    config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
                          backend=backend, seed=seed)
     results = sweep_with_progress(out, setup, config)
-    table = routes_from_results(results, lib, strategy=strategy, max_legs=max_legs)
+    table = routes_from_results(results, lib, strategy=strategy, push_n=push, max_legs=max_legs)
     path = table.save(lib)
     if as_json:
         print(json_text(table.as_dict() | {"out": str(path)}))
@@ -278,7 +280,7 @@ def routes_command(
 
     from gaitlib.cli.tables import table_console
 
-    shown = Table(title=f"{strategy} at 0 N, {samples} transitions a pair: routes through another gait")
+    shown = Table(title=f"{strategy} at {push:g} N, {samples} transitions a pair: routes through another gait")
     for column in ("pair", "direct", "route", "predicted"):
         shown.add_column(column, justify="left" if column in ("pair", "route") else "right")
     for pair, path_ in table.detours().items():
