@@ -26,7 +26,7 @@ def _strict(text: str) -> dict:
 
 def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path) -> None:
     plot = tmp_path / "run.png"
-    result = gaitlib(
+    result = gaitlib_quick(
         "run", "--from", "trot", "--to", "stand", "--strategy", "tmt", "--request-at", "0.5", "--hold", "1.0",
         "--plot", str(plot), "--library", str(switching_library), "--backend", "mujoco", "--json",
     )
@@ -40,7 +40,7 @@ def test_run_writes_its_plot_and_reports_the_switch(switching_library, tmp_path)
 
 
 def test_run_prints_random_s_switch_without_a_score(switching_library, tmp_path) -> None:
-    result = gaitlib(
+    result = gaitlib_quick(
         "run", "--from", "trot", "--to", "stand", "--strategy", "random", "--request-at", "0.2", "--hold", "0.3",
         "--plot", str(tmp_path / "run.png"), "--library", str(switching_library), "--backend", "mujoco",
     )
@@ -103,9 +103,9 @@ def test_benchmark_writes_csv_json_and_plot_and_prints_success(switching_library
         "--pairs", "stand-trot", "--worlds", "4", "--out", str(out), "--library", str(switching_library),
         "--backend", "mujoco",
     ]
-    result = gaitlib(*args, "--json")
+    result = gaitlib_quick(*args, "--json")
     assert result.returncode == 0, result.stderr
-    success = json.loads(result.stdout)["success"]
+    success = _strict(result.stdout)["success"]
     assert set(success) == {"random", "tmt-value", "net-lookahead"}
     assert set(success["random"]) == {"stand-trot"} and set(success["random"]["stand-trot"]) == {"0", "100"}
     assert all(0.0 <= v <= 1.0 for v in success["tmt-value"]["stand-trot"].values())

@@ -8,7 +8,7 @@ import json
 
 import pytest
 import torch
-from cli_runner import gaitlib, gaitlib_quick
+from cli_runner import gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.benchmark.routes import ROUTES_FILE, RouteTable, load_routes
@@ -43,7 +43,7 @@ def test_a_detour_is_taken_only_where_it_beats_the_direct_switch_beyond_its_inte
 
 def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_stale(switching_library, tmp_path):
     library = copy_library(Library(switching_library), tmp_path / "library")
-    measured = gaitlib("routes", "--samples", "2", "--worlds", "4", "--backend", "mujoco", "--library",
+    measured = gaitlib_quick("routes", "--samples", "2", "--worlds", "4", "--backend", "mujoco", "--library",
                        str(library.root), "--out", str(tmp_path / "bench"), "--json")
     assert measured.returncode == 0, measured.stderr
     written = json.loads(measured.stdout)
@@ -61,7 +61,7 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
         load_routes(library, ("stand", "trot"))
     shown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)["routes"]
     assert shown["state"] == "stale" and "other switching models" in shown["why"]
-    ran = gaitlib("run", "--routed", "--library", str(library.root), "--plot", str(tmp_path / "r.png"))
+    ran = gaitlib_quick("run", "--routed", "--library", str(library.root), "--plot", str(tmp_path / "r.png"))
     assert ran.returncode == 2 and "other switching models" in ran.stderr.strip().splitlines()[0]
     (library.switching_dir / ROUTES_FILE).unlink()
     with pytest.raises(GaitlibError, match="has no route table"):
@@ -69,7 +69,7 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
 
 
 def test_run_routed_follows_the_shipped_route_table(tmp_path) -> None:
-    ran = gaitlib("run", "--from", "trot", "--to", "pace", "--routed", "--request-at", "0.3", "--hold", "0.7",
+    ran = gaitlib_quick("run", "--from", "trot", "--to", "pace", "--routed", "--request-at", "0.3", "--hold", "0.7",
                   "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--json")
     assert ran.returncode == 0, ran.stderr
     report = json.loads(ran.stdout)
