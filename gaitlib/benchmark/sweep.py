@@ -143,15 +143,16 @@ class CellCounts:
     """Outcomes of one (strategy, pair, magnitude) cell."""
 
     samples: int = 0
+    """Transitions counted (a routed one once, whatever its legs)."""
     successes: int = 0
     forced: int = 0
     """Switches made by the deadline rather than the strategy."""
     wait_s: float = 0.0
-    """Total time from request to switch over the transitions that switched, s."""
+    """Total time from request to switch over the switches made, s."""
     switched: int = 0
-    """Transitions that reached the switch (the others fell while waiting)."""
+    """Switches made (the other requests fell while waiting; a routed transition makes one a leg it reaches)."""
     source_falls: int = 0
-    """Source runs that fell before the request (redone, not counted in ``samples``)."""
+    """Source runs that fell before a transition's first request (redone, not counted in ``samples``)."""
 
 
 def run_sweep(

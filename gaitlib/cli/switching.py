@@ -26,7 +26,7 @@ from gaitlib.cli.options import (
 )
 from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
 
-__all__ = ["benchmark_command", "routes_command", "run_command", "sweep_with_progress"]
+__all__ = ["benchmark_command", "routes_command", "run_command"]
 
 
 def run_command(
@@ -225,7 +225,7 @@ def benchmark_command(
         seed=seed,
         routes=detours,
     )
-    results = sweep_with_progress(out, setup, config, cluster=cluster)
+    results = _sweep_with_progress(out, setup, config, cluster=cluster)
     rows = cell_results(results)
     if not rows:
         raise GaitlibError("the benchmark produced no results")
@@ -270,11 +270,11 @@ def routes_command(
     out = out or Path("runs") / f"routes-{lib.root.resolve().name}"
     config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
                          backend=backend, seed=seed)
-    results = sweep_with_progress(out, setup, config)
+    results = _sweep_with_progress(out, setup, config)
     table = routes_from_results(results, lib, strategy=strategy, push_n=push, max_legs=max_legs)
     path = table.save(lib)
     if as_json:
-        print(json_text(table.as_dict() | {"out": str(path)}))
+        print(json_text(table.as_dict() | {"table": str(path), "measured_in": str(out)}))
         return
     from rich.table import Table
 
@@ -283,15 +283,15 @@ def routes_command(
     shown = Table(title=f"{strategy} at {push:g} N, {samples} transitions a pair: routes through another gait")
     for column in ("pair", "direct", "route", "predicted"):
         shown.add_column(column, justify="left" if column in ("pair", "route") else "right")
-    for pair, path_ in table.detours().items():
-        shown.add_row(pair, f"{table.success(path_[0], path_[-1]):.3f}", " -> ".join(path_),
-                      f"{table.predicted(path_):.3f}")
+    for pair, route in table.detours().items():
+        shown.add_row(pair, f"{table.success(route[0], route[-1]):.3f}", " -> ".join(route),
+                      f"{table.predicted(route):.3f}")
     console = table_console()
     console.print(shown if table.detours() else "every pair switches best directly")
     console.print(f"route table: {path}; measured in {out}")
 
 
-def sweep_with_progress(out: Path, setup, config, *, cluster=None) -> dict:
+def _sweep_with_progress(out: Path, setup, config, *, cluster=None) -> dict:
     """:func:`~gaitlib.benchmark.sweep.run_sweep` with a progress bar on stderr (a line per group in logs)."""
     from rich.console import Console
 
