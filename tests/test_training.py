@@ -212,3 +212,21 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
         episodes=2, seconds=1.0, backend="mujoco", seed=0,
     )
     assert standing.contact_agreement > 0.98 > result.contact_agreement > 0.8
+
+
+def test_eval_counts_each_fall_under_the_terminations_it_met() -> None:
+    from gaitlib.envs import EnvConfig
+    from gaitlib.library import Library
+    from gaitlib.library.layout import shipped_library_dir
+    from gaitlib.training.evaluate import evaluate_policy
+
+    library = Library(shipped_library_dir())
+    trot = library.entry("trot")
+    result = evaluate_policy(  # pushes far beyond what the trot rides out: most episodes fall
+        trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
+        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, seed=0,
+    )
+    falls = round(result.fall_rate * result.episodes)
+    causes = result.falls_by_cause
+    assert set(causes) == {"body_contact", "too_low", "orientation_lost", "diverged"} and falls > 0
+    assert all(0 <= n <= falls for n in causes.values()) and sum(causes.values()) >= falls  # each fall has a cause

@@ -244,6 +244,8 @@ def eval_command(
         + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)"),
         [
             ("fall rate", f"{result.fall_rate:.3f}"),
+            ("falls by cause (one may meet several)",
+             ", ".join(f"{name.replace('_', ' ')} {n}" for name, n in result.falls_by_cause.items()) or "-"),
             ("heading lost (> 90 deg)", f"{result.heading_loss_rate:.3f}"),
             ("median |heading change| (deg)", f"{result.median_heading_change_deg:.1f}"),
             ("joint tracking RMSE (rad)", f"{result.joint_rmse:.4f}"),

@@ -35,7 +35,7 @@ from gaitlib.envs.randomization import (
 )
 from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
-from gaitlib.envs.terminations import TerminationConfig, fallen
+from gaitlib.envs.terminations import TerminationConfig, fall_causes
 from gaitlib.gaits import ReferenceClip
 from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, yaw_of
 from gaitlib.sim import KinematicState, SimBackend, SimState
@@ -144,14 +144,14 @@ class ImitationEnv(VecEnv):
         observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
         ref = observed[0]
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
-        terminated = diverged | fallen(
-            state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination
-        )
+        causes = fall_causes(state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination)
+        terminated = diverged | causes["body_contact"] | causes["too_low"] | causes["orientation_lost"]
         time_out = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_out
 
         extras = {
             "time_outs": time_out,
+            "fall_causes": causes | {"diverged": diverged},
             "log": {f"/reward/{name}": value.mean() for name, value in self._terms.items()}
             | {"/termination/rate": terminated.float().mean(), "/termination/diverged": diverged.float().mean()},
         }

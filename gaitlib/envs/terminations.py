@@ -9,7 +9,7 @@ import torch
 
 from gaitlib.rotations import quat_angle_between, quat_rotate
 
-__all__ = ["TerminationConfig", "fallen", "orientation_lost", "too_low"]
+__all__ = ["TerminationConfig", "fall_causes", "fallen", "orientation_lost", "too_low"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,6 +43,24 @@ def orientation_lost(
     return cosine < math.cos(max_error)
 
 
+def fall_causes(
+    body_contact: torch.Tensor,
+    root_height: torch.Tensor,
+    root_quat: torch.Tensor,
+    ref_root_quat: torch.Tensor,
+    cfg: TerminationConfig,
+) -> dict[str, torch.Tensor]:
+    """Each termination apart, (N,) bool: ``body_contact`` (a non-foot body touches the ground), ``too_low`` (the
+    trunk), ``orientation_lost``; a fall may meet several."""
+    return {
+        "body_contact": body_contact,
+        "too_low": too_low(root_height, min_height=cfg.min_height),
+        "orientation_lost": orientation_lost(
+            root_quat, ref_root_quat, max_error=cfg.max_orientation_error, heading=cfg.heading
+        ),
+    }
+
+
 def fallen(
     body_contact: torch.Tensor,
     root_height: torch.Tensor,
@@ -51,8 +69,5 @@ def fallen(
     cfg: TerminationConfig,
 ) -> torch.Tensor:
     """Any termination: a non-foot body touches the ground, the trunk is too low, or orientation is lost."""
-    return (
-        body_contact
-        | too_low(root_height, min_height=cfg.min_height)
-        | orientation_lost(root_quat, ref_root_quat, max_error=cfg.max_orientation_error, heading=cfg.heading)
-    )
+    causes = fall_causes(body_contact, root_height, root_quat, ref_root_quat, cfg)
+    return causes["body_contact"] | causes["too_low"] | causes["orientation_lost"]

@@ -50,8 +50,12 @@ class EvalResult:
     """Largest random push, N (0: no pushes)."""
     action_delay_steps: int | None
     """Control steps every action waited (``None``: the randomized delay of training)."""
+    falls_by_cause: dict[str, int]
+    """Falls that met each termination (``body_contact``: a non-foot body on the ground; ``too_low``: the trunk
+    below 0.12 m; ``orientation_lost``: tilted past 90 degrees; ``diverged``: the physics), a fall counted under
+    every one it met: a fall by ``body_contact`` alone left the trunk up and level (a shin that touched down)."""
 
-    def as_dict(self) -> dict[str, float]:
+    def as_dict(self) -> dict:
         return asdict(self)
 
 
@@ -106,21 +110,24 @@ def evaluate_policy(
             mean_episode_seconds=float((counted * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
+            falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
         )
     finally:
         sim.close()
 
 
 def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
-    """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, turned (more than 90
-    degrees from its start while up), alive steps (the episode's length), the steps summed over (those after which
-    the world was still up), summed squared joint error, share of feet in the reference's contact state, forward
-    and reference speed, and the last absolute heading change while up, rad."""
+    """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, the terminations its
+    fall met (``causes``, by name), turned (more than 90 degrees from its start while up), alive steps (the episode's
+    length), the steps summed over (those after which the world was still up), summed squared joint error, share of
+    feet in the reference's contact state, forward and reference speed, and the last absolute heading change while
+    up, rad."""
     n, dev = env.num_envs, env.device
     alive = torch.ones(n, dtype=torch.bool, device=dev)
     t = {"fell": torch.zeros(n, dtype=torch.bool, device=dev), "turned": torch.zeros(n, dtype=torch.bool, device=dev)}
     names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
     t |= {k: torch.zeros(n, device=dev) for k in names}
+    t["causes"] = {}
     start_yaw = yaw_of(env.sim_state.root_quat)
     obs = env.get_observations()
     for _ in range(env.max_episode_length):
@@ -128,7 +135,10 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         s, ref = env.sim_state, env.reference.frame()
         # The rows of worlds that just finished hold their reset state: count only those still alive.
         ended = dones & alive
-        t["fell"] |= ended & ~extras["time_outs"]
+        fell = ended & ~extras["time_outs"]
+        t["fell"] |= fell
+        for name, met in extras["fall_causes"].items():
+            t["causes"][name] = t["causes"].get(name, torch.zeros(n, dtype=torch.bool, device=dev)) | (fell & met)
         alive &= ~dones
         live = alive.float()
         yaw = yaw_of(s.root_quat)
