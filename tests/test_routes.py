@@ -133,6 +133,11 @@ def test_a_routed_sweep_records_its_routes_and_resumes_only_with_them(tmp_path) 
         run_sweep(tmp_path / "bench", setup, dataclasses.replace(config, routes={}))
     with pytest.raises(GaitlibError, match="does not lead from one gait to another as trot-pace"):
         dataclasses.replace(config, routes={"trot-pace": ("trot", "stand")})
+    with pytest.raises(GaitlibError, match="falls 'legs': contact or trunk"):
+        dataclasses.replace(config, falls="legs")
+    trunk = run_sweep(tmp_path / "trunk", setup, dataclasses.replace(config, falls="trunk"))
+    assert trunk["settings"]["falls"] == "trunk" and "falls" not in results["settings"]  # old sweeps still resume
+    assert trunk["groups"]["random@0"]["cells"]["trot-pace"]["samples"] == 3
 
 
 def _outcome(world: int, leg: int, success: bool) -> TrialOutcome:

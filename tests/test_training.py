@@ -230,3 +230,10 @@ def test_eval_counts_each_fall_under_the_terminations_it_met() -> None:
     causes = result.falls_by_cause
     assert set(causes) == {"body_contact", "too_low", "orientation_lost", "diverged"} and falls > 0
     assert all(0 <= n <= falls for n in causes.values()) and sum(causes.values()) >= falls  # each fall has a cause
+    assert causes["body_contact"] > 0 and result.body_contact_falls
+    trunk = evaluate_policy(  # the same, a leg's or a thigh's touch ridden through: only the trunk ends an episode
+        trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
+        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, body_contact_falls=False, seed=0,
+    )
+    assert trunk.falls_by_cause["body_contact"] == 0 and not trunk.body_contact_falls
+    assert trunk.falls_by_cause["too_low"] + trunk.falls_by_cause["orientation_lost"] >= trunk.fall_rate * 8

@@ -36,6 +36,7 @@ from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
 from gaitlib.defaults import COMPARED
 from gaitlib.envs import EnvConfig
+from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import SwitchEvent, SwitchingSetup, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.robots import RobotSpec
@@ -88,6 +89,10 @@ class SweepConfig:
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
     """Base seed; each magnitude derives its own from it (the same for every strategy)."""
+    falls: str = "contact"
+    """What ends a transition as a fall: ``contact``, a non-foot body on the ground or the trunk too low or turned
+    away (gaitlib's training and labels); ``trunk``, only the trunk too low or turned away, a leg's touch ridden
+    through (legged_gym's A1: :class:`~gaitlib.envs.terminations.TerminationConfig`)."""
     routes: dict[str, tuple[str, ...]] = field(default_factory=dict)
     """``"m-n"`` -> the gaits (m, ..., n) a transition of that pair switches through, each switch with the group's
     strategy, one after the other on the same robot (:mod:`gaitlib.benchmark.routes`); the other pairs switch
@@ -118,6 +123,8 @@ class SweepConfig:
             raise GaitlibError(
                 "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
             )
+        if self.falls not in ("contact", "trunk"):
+            raise GaitlibError(f"falls '{self.falls}': contact or trunk")
         for pair, path in self.routes.items():
             if len(path) < 2 or f"{path[0]}-{path[-1]}" != pair or any(a == b for a, b in itertools.pairwise(path)):
                 raise GaitlibError(f"the route {' -> '.join(path)} does not lead from one gait to another as {pair}")
@@ -130,7 +137,8 @@ class SweepConfig:
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        for name in ("backend", "device", "gap", "protocol") + (() if self.routes else ("routes",)):
+        defaults = (() if self.routes else ("routes",)) + (("falls",) if self.falls == "contact" else ())
+        for name in ("backend", "device", "gap", "protocol", *defaults):  # defaults: sweeps from before they existed
             fixed.pop(name)
         protocol = asdict(self.protocol)
         for name in ("push_window", "chain"):  # always the request window, never chained
@@ -281,7 +289,9 @@ def _run_group(
     sim = make_backend(cfg.backend_name(), num_worlds=cfg.num_worlds, robot=robot, device=cfg.device)
     try:
         pushes = cfg.protocol.pushes(magnitude, fixed=True)
-        env = cfg.gap.make_env(setup, sim, EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes), seed=seed)
+        termination = TerminationConfig(body_contact=cfg.falls == "contact")
+        env_cfg = EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes, termination=termination)
+        env = cfg.gap.make_env(setup, sim, env_cfg, seed=seed)
         controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed)
         routes = [cfg.routes.get(f"{m}-{n}", (m, n)) for m, n in pairs]
         legs = [[(setup.gait_index(a), setup.gait_index(b)) for a, b in itertools.pairwise(r)] for r in routes]

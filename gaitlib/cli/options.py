@@ -134,6 +134,23 @@ def bounded(default, *names: str, help: str, bounds: Bounds):
     return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check)
 
 
+def falls_option():
+    """``--falls contact|trunk``: what ends an episode or a transition as a fall; another value is refused in one
+    line at parse time."""
+
+    def check(param: typer.CallbackParam, value: str) -> str:
+        if value not in ("contact", "trunk"):
+            raise OptionError(f"--falls takes contact or trunk, got '{value}'")
+        return value
+
+    return typer.Option(
+        "contact", "--falls", callback=check,
+        help="What is a fall: contact (a non-foot body on the ground, or the trunk too low or tilted: gaitlib's "
+        "training and quality bar) or trunk (only the trunk too low or tilted, a leg's touch ridden through: "
+        "legged_gym's A1).",
+    )
+
+
 def ray_option():
     """``--ray``: run the job's chunks on Ray workers, on a local Ray started for the run or, with the ADDRESS
     argument (:func:`ray_address_argument`), on a running cluster. Without Ray installed it is refused in one line

@@ -20,6 +20,7 @@ from gaitlib.cli.options import (
     TIME_IN_RUN,
     WORLDS,
     bounded,
+    falls_option,
     ray_address_argument,
     ray_option,
     workers_option,
@@ -176,6 +177,7 @@ def benchmark_command(
     ),
     routed: bool = typer.Option(False, "--routed", help="Each transition follows the library's route table "
                                 "(gaitlib routes): through another gait where that measured better, counted once."),
+    falls: str = falls_option(),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),
     workers: int | None = workers_option(),
@@ -223,6 +225,7 @@ def benchmark_command(
         gap=gap,
         backend=backend,
         seed=seed,
+        falls=falls,
         routes=detours,
     )
     results = _sweep_with_progress(out, setup, config, cluster=cluster)

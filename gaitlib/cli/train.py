@@ -8,7 +8,17 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
-from gaitlib.cli.options import COUNT, DELAY_STEPS, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded
+from gaitlib.cli.options import (
+    COUNT,
+    DELAY_STEPS,
+    EPISODE_SECONDS,
+    PUSH_N,
+    SEED,
+    WORLDS,
+    Bounds,
+    bounded,
+    falls_option,
+)
 from gaitlib.cli.tables import print_measures
 
 __all__ = ["SWITCH_START", "eval_command", "train_command"]
@@ -209,6 +219,7 @@ def eval_command(
     plot: Path | None = typer.Option(None, "--plot", help="With --impulses: the curve as a PNG."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    falls: str = falls_option(),
 ) -> None:
     """Evaluate a library policy under paper Table 1 randomization: falls, heading held, tracking errors; or, with
     --impulses, its fall rate against a single push's impulse."""
@@ -234,6 +245,7 @@ def eval_command(
         backend=backend,
         push_max=push_max,
         action_delay_steps=action_delay,
+        body_contact_falls=falls == "contact",
         seed=seed,
     )
     if as_json:

@@ -23,6 +23,11 @@ class TerminationConfig:
     heading: bool = True
     """The rotation compared includes the heading (training: a policy that turns away fails); ``False``: only the
     tilt, the angle between the trunk's up axis and the reference trunk's (a fall, as evaluation counts it)."""
+    body_contact: bool = True
+    """A non-foot body on the ground ends the episode (gaitlib's training, its quality bar and its benchmark);
+    ``False``: only the trunk's height and orientation do, as legged_gym's A1 ends an episode
+    only when its base touches the ground and penalizes its legs' contacts (``terminate_after_contacts_on =
+    ["base"]``, github.com/leggedrobotics/legged_gym, ``envs/a1/a1_config.py``)."""
 
 
 def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:
@@ -50,10 +55,10 @@ def fall_causes(
     ref_root_quat: torch.Tensor,
     cfg: TerminationConfig,
 ) -> dict[str, torch.Tensor]:
-    """Each termination apart, (N,) bool: ``body_contact`` (a non-foot body touches the ground), ``too_low`` (the
-    trunk), ``orientation_lost``; a fall may meet several."""
+    """Each termination in force apart, (N,) bool: ``body_contact`` (a non-foot body touches the ground; never,
+    unless ``cfg.body_contact``), ``too_low`` (the trunk), ``orientation_lost``; a fall may meet several."""
     return {
-        "body_contact": body_contact,
+        "body_contact": body_contact if cfg.body_contact else torch.zeros_like(body_contact),
         "too_low": too_low(root_height, min_height=cfg.min_height),
         "orientation_lost": orientation_lost(
             root_quat, ref_root_quat, max_error=cfg.max_orientation_error, heading=cfg.heading

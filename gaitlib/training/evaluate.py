@@ -50,6 +50,8 @@ class EvalResult:
     """Largest random push, N (0: no pushes)."""
     action_delay_steps: int | None
     """Control steps every action waited (``None``: the randomized delay of training)."""
+    body_contact_falls: bool
+    """Whether a non-foot body on the ground counted as a fall (else only the trunk too low or tilted did)."""
     falls_by_cause: dict[str, int]
     """Falls that met each termination (``body_contact``: a non-foot body on the ground; ``too_low``: the trunk
     below 0.12 m; ``orientation_lost``: tilted past 90 degrees; ``diverged``: the physics), a fall counted under
@@ -69,13 +71,15 @@ def evaluate_policy(
     backend: str = "auto",
     push_max: float = 0.0,
     action_delay_steps: int | None = None,
+    body_contact_falls: bool = True,
     seed: int = 0,
 ) -> EvalResult:
     """Run ``episodes`` worlds for ``seconds`` s each with the deterministic policy and Table 1 randomization.
 
     ``env_cfg`` holds the policy's action and observation settings; its episode length, pushes and terminations
     are set here. ``action_delay_steps`` fixes the control steps every action waits (``None``: the randomized
-    delay of training).
+    delay of training). ``body_contact_falls``: a non-foot body on the ground is a fall (``False``: only the trunk
+    too low or tilted is, :class:`~gaitlib.envs.terminations.TerminationConfig`).
     """
     randomization = env_cfg.randomization
     if action_delay_steps is not None:
@@ -84,7 +88,7 @@ def evaluate_policy(
         env_cfg,
         episode_seconds=seconds,
         pushes=PushConfig(max_force=push_max),
-        termination=replace(env_cfg.termination, heading=False),
+        termination=replace(env_cfg.termination, heading=False, body_contact=body_contact_falls),
         randomization=randomization,
     )
     sim = make_backend(backend, num_worlds=episodes)
@@ -110,6 +114,7 @@ def evaluate_policy(
             mean_episode_seconds=float((counted * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
+            body_contact_falls=body_contact_falls,
             falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
         )
     finally:
