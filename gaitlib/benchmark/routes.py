@@ -51,7 +51,7 @@ class RouteTable:
     switching: str
     """SHA-256 of the switching models' checksum list (``switching/checksums.json``) measured with."""
     measured_with: dict
-    """The benchmark settings the rates come from (samples, seed, protocol times)."""
+    """The benchmark settings the rates come from (samples, seed, protocol times, what a fall is)."""
 
     def __post_init__(self) -> None:
         missing = [f"{m}-{n}" for m, n in product(self.gaits, repeat=2) if m != n and f"{m}-{n}" not in self.rates]
@@ -134,7 +134,8 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         policies=dict(identities),
         switching=file_sha256(library.switching_dir / Library.CHECKSUMS),
         measured_with={k: results["settings"][k] for k in ("samples", "seed", "num_worlds", "warmup_s",
-                                                           "source_extra_s", "horizon_s", "deadline_s")},
+                                                           "source_extra_s", "horizon_s", "deadline_s")}
+        | {"falls": results["settings"].get("falls", "contact")},
     )
 
 

@@ -257,6 +257,7 @@ def routes_command(
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (the route table)."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    falls: str = falls_option(),
 ) -> None:
     """Measure every ordered pair with --strategy (at --push, default 0 N) and write the library's route table
     (switching/routes.json): the pairs that do better through another gait, for run and benchmark --routed."""
@@ -272,7 +273,7 @@ def routes_command(
     lib = setup.resources.library
     out = out or Path("runs") / f"routes-{lib.root.resolve().name}"
     config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
-                         backend=backend, seed=seed)
+                         backend=backend, seed=seed, falls=falls)
     results = _sweep_with_progress(out, setup, config)
     table = routes_from_results(results, lib, strategy=strategy, push_n=push, max_legs=max_legs)
     path = table.save(lib)
