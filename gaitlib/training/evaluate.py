@@ -55,7 +55,8 @@ class EvalResult:
     falls_by_cause: dict[str, int]
     """Falls that met each termination (``body_contact``: a non-foot body on the ground; ``too_low``: the trunk
     below 0.12 m; ``orientation_lost``: tilted past 90 degrees; ``diverged``: the physics), a fall counted under
-    every one it met: a fall by ``body_contact`` alone left the trunk up and level (a shin that touched down)."""
+    every one it met: a fall by ``body_contact`` alone ended with the trunk still above 0.12 m and tilted less than
+    90 degrees (a leg, or the trunk itself, touching down)."""
 
     def as_dict(self) -> dict:
         return asdict(self)
