@@ -124,7 +124,6 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         raise GaitlibError(f"the benchmark has no group of '{strategy}' at {push_n:g} N to measure routes with")
     identities = results["library_identities"]
     library.check_identities(identities, what="the benchmark results")
-    library.check_switching()
     return RouteTable(
         gaits=library.order(identities),
         strategy=strategy,
@@ -132,7 +131,7 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         rates={pair: (c["successes"], c["samples"]) for pair, c in group["cells"].items()},
         max_legs=max_legs,
         policies=dict(identities),
-        switching=file_sha256(library.switching_dir / Library.CHECKSUMS),
+        switching=_switching_identity(library),
         measured_with={k: results["settings"][k] for k in ("samples", "seed", "num_worlds", "warmup_s",
                                                            "source_extra_s", "horizon_s", "deadline_s")}
         | {"falls": results["settings"].get("falls", "contact")},
@@ -148,8 +147,7 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
                            f"{library.root}")
     saved = read_json(path, header=_FORMAT, what="a gaitlib route table", error=GaitlibError)
     again = f"; measure it again: gaitlib routes --library {library.root}"
-    library.check_switching()
-    if saved.get("switching") != file_sha256(library.switching_dir / Library.CHECKSUMS):
+    if saved.get("switching") != _switching_identity(library):
         raise GaitlibError(f"{path} was measured with other switching models than the library's{again}")
     if set(saved.get("gaits", ())) != set(gaits) or saved.get("policies") != library.identities(gaits):
         raise GaitlibError(f"{path} was measured with other policies than the library's{again}")
@@ -158,3 +156,9 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
         rates={pair: (int(r[0]), int(r[1])) for pair, r in saved["rates"].items()}, policies=saved["policies"],
         switching=saved["switching"], measured_with=saved["measured_with"],
     )
+
+
+def _switching_identity(library: Library) -> str:
+    """SHA-256 of ``library``'s switching checksum list, once its files are checked against it (one line if not)."""
+    library.check_switching()
+    return file_sha256(library.switching_dir / Library.CHECKSUMS)

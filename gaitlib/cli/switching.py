@@ -287,11 +287,12 @@ def routes_command(
     shown = Table(title=f"{strategy} at {push:g} N, {samples} transitions a pair: routes through another gait")
     for column in ("pair", "direct", "route", "predicted"):
         shown.add_column(column, justify="left" if column in ("pair", "route") else "right")
-    for pair, route in table.detours().items():
+    detours = table.detours()
+    for pair, route in detours.items():
         shown.add_row(pair, f"{table.success(route[0], route[-1]):.3f}", " -> ".join(route),
                       f"{table.predicted(route):.3f}")
     console = table_console()
-    console.print(shown if table.detours() else "every pair switches best directly")
+    console.print(shown if detours else "every pair switches best directly")
     console.print(f"route table: {path}; measured in {out}")
 
 

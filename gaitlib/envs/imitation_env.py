@@ -35,7 +35,7 @@ from gaitlib.envs.randomization import (
 )
 from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
-from gaitlib.envs.terminations import TerminationConfig, fall_causes
+from gaitlib.envs.terminations import TerminationConfig, any_cause, fall_causes
 from gaitlib.gaits import ReferenceClip
 from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, yaw_of
 from gaitlib.sim import KinematicState, SimBackend, SimState
@@ -145,7 +145,7 @@ class ImitationEnv(VecEnv):
         ref = observed[0]
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
         causes = fall_causes(state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination)
-        terminated = diverged | causes["body_contact"] | causes["too_low"] | causes["orientation_lost"]
+        terminated = diverged | any_cause(causes)
         time_out = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_out
 

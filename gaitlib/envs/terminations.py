@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import torch
 
 from gaitlib.rotations import quat_angle_between, quat_rotate
 
-__all__ = ["TerminationConfig", "fall_causes", "fallen", "orientation_lost", "too_low"]
+__all__ = ["TerminationConfig", "any_cause", "fall_causes", "fallen", "orientation_lost", "too_low"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,6 +67,11 @@ def fall_causes(
     }
 
 
+def any_cause(causes: Mapping[str, torch.Tensor]) -> torch.Tensor:
+    """(N,) bool: some cause of ``causes`` (as :func:`fall_causes` gives them) held."""
+    return torch.stack(tuple(causes.values())).any(dim=0)
+
+
 def fallen(
     body_contact: torch.Tensor,
     root_height: torch.Tensor,
@@ -74,5 +80,4 @@ def fallen(
     cfg: TerminationConfig,
 ) -> torch.Tensor:
     """Any termination: a non-foot body touches the ground, the trunk is too low, or orientation is lost."""
-    causes = fall_causes(body_contact, root_height, root_quat, ref_root_quat, cfg)
-    return causes["body_contact"] | causes["too_low"] | causes["orientation_lost"]
+    return any_cause(fall_causes(body_contact, root_height, root_quat, ref_root_quat, cfg))

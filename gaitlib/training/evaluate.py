@@ -144,7 +144,7 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         fell = ended & ~extras["time_outs"]
         t["fell"] |= fell
         for name, met in extras["fall_causes"].items():
-            t["causes"][name] = t["causes"].get(name, torch.zeros(n, dtype=torch.bool, device=dev)) | (fell & met)
+            t["causes"][name] = (t["causes"][name] | (fell & met)) if name in t["causes"] else fell & met
         alive &= ~dones
         live = alive.float()
         yaw = yaw_of(s.root_quat)
