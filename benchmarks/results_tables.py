@@ -1,0 +1,413 @@
+"""Make the headline tables of docs/results.md from the raw results stored beside it, and write them into the doc.
+
+    python benchmarks/results_tables.py            # rewrite the generated blocks of docs/results.md
+    python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
+
+Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``pairs-0n``,
+``routes``, ``net-accuracy``). Everything between the two is made here from the evidence and nothing else, so a figure
+edited by hand, or a stored result replaced without rewriting the doc, makes ``--check`` fail
+(tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each ``{"command": the exact
+command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, and the library's own
+``library/switching/accuracy.json``. A table whose evidence is not stored yet says "not yet measured".
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import re
+import sys
+import textwrap
+from collections.abc import Sequence
+from decimal import ROUND_HALF_UP, Decimal
+from pathlib import Path
+
+from gaitlib.atomic import atomic_path
+from gaitlib.stats import wilson_interval
+
+__all__ = [
+    "ACCURACY", "DOC", "EVIDENCE", "TABLES", "accuracy_table", "check_doc", "fill", "first_difference", "main",
+    "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table", "write_doc",
+]
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "results.md"
+"""The doc whose generated blocks these tables are."""
+EVIDENCE = ROOT / "docs" / "results" / "library"
+"""The stored raw results of the shipped library."""
+ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
+"""The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
+TABLES = ("quality-bar", "pairs-0n", "routes", "net-accuracy")
+"""The generated blocks, in the doc's order."""
+GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
+"""The shipped gaits, in the order the tables list them."""
+STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
+"""Column order of the strategies in a switching table."""
+BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
+"""The quality bar: falls in at most 1% of episodes, speed within 10% of the reference, median heading change at
+most 15 degrees."""
+GOAL = 0.99
+"""The success a switch is counted against."""
+PAPER_PAIRS = ("stand-pace", "stand-trot", "pace-trot", "pace-stand", "trot-pace", "trot-stand")
+"""The paper's six pairs, in its Table 3 column order."""
+INPUTS = ("latent", "explicit", "phase")
+"""The transition-net's input kinds, in the order of the paper's claim (latent >= explicit > phase)."""
+BLOCK = re.compile(r"<!-- table: ([a-z0-9-]+) -->\n(.*?)<!-- /table -->", re.S)
+WIDTH = 120
+"""The doc's line length: the tables' prose is wrapped to it (a table row or an inline code span is never broken)."""
+
+
+def read_evidence(path: Path) -> dict | None:
+    """The evidence stored at ``path`` (``command``, ``made``, ``result``); ``None`` when there is none yet."""
+    if not path.is_file():
+        return None
+    evidence = json.loads(path.read_text(encoding="utf-8"))
+    missing = sorted({"command", "made", "result"} - set(evidence))
+    if missing:
+        raise ValueError(f"{path} is not an evidence file: no {', '.join(missing)}")
+    return evidence
+
+
+def _shown(path: Path) -> str:
+    """``path`` as the doc names it: from the repository root when under it."""
+    path = Path(path).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def _cite(path: Path, evidence: dict) -> str:
+    return f"`{_shown(path)}` (made {evidence['made']}): `{evidence['command']}`"
+
+
+def _not_yet(*paths: Path) -> str:
+    return "Not yet measured: " + ", ".join(f"`{_shown(p)}`" for p in paths) + " not stored yet."
+
+
+def _pct(rate: float) -> str:
+    """A rate as a percentage to a tenth, halves rounded up as written (the paper's 0.8915 is 89.2, not 89.1)."""
+    return str((Decimal(str(rate)) * 100).quantize(Decimal("0.1"), rounding=ROUND_HALF_UP))
+
+
+def _interval(low: float, high: float) -> str:
+    return f"[{_pct(low)}, {_pct(high)}]"
+
+
+def _success(successes: int, samples: int) -> str:
+    """A success rate with its Wilson 95% interval, bold when it reaches :data:`GOAL`."""
+    rate = successes / samples
+    text = _pct(rate)
+    return f"{f'**{text}**' if rate >= GOAL else text} {_interval(*wilson_interval(successes, samples))}"
+
+
+def _speed(value: float) -> str:
+    return f"{abs(value) if round(value, 2) == 0 else value:.2f}"
+
+
+def _arrow(pair: str) -> str:
+    return pair.replace("-", " → ")
+
+
+def _gait_order(name: str) -> tuple[int, str]:
+    return (GAITS.index(name) if name in GAITS else len(GAITS), name)
+
+
+def _misses(r: dict) -> list[str]:
+    """What of the quality bar an evaluation misses, from its numbers."""
+    misses = []
+    if r["fall_rate"] > BAR_FALLS:
+        misses.append(f"falls {_pct(r['fall_rate'])}% over {_pct(BAR_FALLS)}%")
+    if r["speed_error"] > BAR_SPEED:
+        misses.append(f"speed error {_pct(r['speed_error'])}% over {_pct(BAR_SPEED)}%")
+    if r["median_heading_change_deg"] > BAR_HEADING_DEG:
+        misses.append(f"median heading change {r['median_heading_change_deg']:.1f} deg over {BAR_HEADING_DEG:g}")
+    return misses
+
+
+def _quality_row(r: dict) -> str:
+    episodes = r["episodes"]
+    falls, touches = round(r["fall_rate"] * episodes), round(r["touch_rate"] * episodes)
+    still = abs(r["reference_speed"]) < 1e-6  # the evaluation's speed error is then the drift in m/s
+    error = f"{r['speed_error']:.3f} m/s drift" if still else f"{_pct(r['speed_error'])}%"
+    misses = _misses(r)
+    return (f"| {r['gait']} | {_pct(r['fall_rate'])}% ({falls} of {episodes}) {_interval(*r['fall_ci95'])} "
+            f"| {_pct(r['touch_rate'])}% ({touches}) {_interval(*r['touch_ci95'])} | {r['longest_touch_s']:.2f} s "
+            f"| {_speed(r['forward_speed'])} ({_speed(r['reference_speed'])}) | {error} "
+            f"| {r['median_heading_change_deg']:.1f} deg | {'no: ' + '; '.join(misses) if misses else 'yes'} |")
+
+
+def _eval_sources(found: dict[str, tuple[Path, dict]]) -> str:
+    """The evaluations' evidence: one line when the commands differ only in the gait, else one per file."""
+    templates = {e["command"].replace(f"eval {g} ", "eval GAIT ") for g, (_, e) in found.items()}
+    dates = {e["made"] for _, e in found.values()}
+    if len(templates) == 1 and len(dates) == 1:
+        folder = _shown(next(iter(found.values()))[0].parent)
+        return (f"Evidence: `{folder}/eval-GAIT.json` for GAIT in {', '.join(found)} (made {dates.pop()}), each the "
+                f"output of `{templates.pop()}`.")
+    return "Evidence:\n\n" + "\n".join(f"- {_cite(p, e)}" for p, e in found.values())
+
+
+def quality_bar(evidence_dir: Path = EVIDENCE) -> str:
+    """Table (a): each gait's evaluation against the quality bar, from ``eval-GAIT.json``."""
+    paths = sorted(Path(evidence_dir).glob("eval-*.json"), key=lambda p: _gait_order(p.stem.removeprefix("eval-")))
+    found = {p.stem.removeprefix("eval-"): (p, read_evidence(p)) for p in paths}
+    if not found:
+        return _not_yet(Path(evidence_dir) / "eval-GAIT.json")
+    results = [e["result"] for _, e in found.values()]
+    lines = ["| gait | falls [95%] | leg touches [95%] | longest touch | speed (reference), m/s | speed error "
+             "| median heading change | meets the bar |", "|---|---|---|---|---|---|---|---|"]
+    lines += [_quality_row(r) for r in results]
+    runs = sorted({f"{r['episodes']} episodes of {r['seconds']:g} s" for r in results})
+    definitions = sorted({r["falls"] for r in results})
+    meeting = [r["gait"] for r in results if not _misses(r)]
+    missing = [g for g in GAITS if g not in found]
+    lines += ["", f"{' / '.join(runs)} a gait, no pushes; falls by the `{'` / `'.join(definitions)}` definition. "
+              f"{len(meeting)} of {len(results)} gaits meet the bar."]
+    lines += [f"The {r['gait']} misses it: {'; '.join(_misses(r))}." for r in results if _misses(r)]
+    if missing:
+        lines.append(f"Not yet measured: {', '.join(missing)}.")
+    return "\n".join([*lines, "", _eval_sources(found)])
+
+
+def _groups_at(result: dict, magnitude: float) -> dict[str, dict]:
+    """strategy -> its cells (pair -> counts) at ``magnitude`` N, strategies in :data:`STRATEGIES` order."""
+    groups = {g["strategy"]: g["cells"] for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude}
+    order = {s: i for i, s in enumerate(STRATEGIES)}
+    return dict(sorted(groups.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
+
+
+def _settings_line(settings: dict) -> str:
+    """What a benchmark's cells are: size, seed and the definition of a fall."""
+    return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
+           "definition"
+
+
+def pairs_table(evidence_dir: Path = EVIDENCE) -> str:
+    """Table (b): every ordered pair at 0 N, each strategy's success with its interval and its touches."""
+    path = Path(evidence_dir) / "bench-0n.json"
+    evidence = read_evidence(path)
+    if evidence is None:
+        return _not_yet(path)
+    groups = _groups_at(evidence["result"], 0.0)
+    pairs = sorted({p for cells in groups.values() for p in cells}, key=lambda p: p.split("-"))
+    lines = ["| pair | " + " | ".join(f"{s} [95%] | {s} touches" for s in groups) + " |",
+             "|---|" + "---|---|" * len(groups)]
+    for pair in pairs:
+        cells = [groups[s].get(pair) for s in groups]
+        lines.append(f"| {_arrow(pair)} | " + " | ".join(
+            f"{_success(c['successes'], c['samples'])} | {_pct(c['touched'] / c['samples'])}%" if c else "- | -"
+            for c in cells) + " |")
+    pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
+              for cells in groups.values()]
+    lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{_pct(s / n)} | {_pct(t / n)}%" for s, n, t in pooled)
+                 + " |")
+    reached = [sum(c["successes"] >= GOAL * c["samples"] for c in cells.values()) for cells in groups.values()]
+    counts = [f"{k} of {len(cells)} | " for k, cells in zip(reached, groups.values(), strict=True)]
+    lines.append(f"| pairs at {_pct(GOAL)}% or more | " + " | ".join(counts) + " |")
+    summary = ", ".join(f"`{s}` {k} of {len(c)}" for (s, c), k in zip(groups.items(), reached, strict=True))
+    return "\n".join([*lines, "", f"Pairs at {_pct(GOAL)}% or more: {summary}. "
+                      f"{_settings_line(evidence['result']['settings'])}; a touch: a non-foot body on the ground from "
+                      "the request to the verdict, ridden through.", "", f"Evidence: {_cite(path, evidence)}"])
+
+
+def _route(pair: str, routed: dict, table: dict | None) -> list[str]:
+    """The gaits a routed transition of ``pair`` went through: the routed benchmark's own, else the table's."""
+    route = routed["result"]["settings"].get("routes", {}).get(pair)
+    if route is None and table is not None:
+        route = table["result"].get("detours", {}).get(pair)
+    return list(route) if route else []
+
+
+def _predicted(route: list[str], table: dict | None) -> str:
+    """The product of the route's legs' rates in the route table, %."""
+    rates = table["result"].get("rates", {}) if table is not None else {}
+    legs = [f"{a}-{b}" for a, b in itertools.pairwise(route)]
+    if not legs or any(leg not in rates for leg in legs):
+        return "-"
+    product = 1.0
+    for leg in legs:
+        successes, samples = rates[leg]
+        product *= successes / samples
+    return _pct(product)
+
+
+def routes_table(evidence_dir: Path = EVIDENCE) -> str:
+    """Table (c): the detour pairs switched directly and routed (the same strategy, seed and pairs)."""
+    paths = {name: Path(evidence_dir) / f"{name}.json" for name in ("bench-direct", "bench-routed", "routes")}
+    found = {name: read_evidence(p) for name, p in paths.items()}
+    direct, routed, table = found["bench-direct"], found["bench-routed"], found["routes"]
+    if direct is None or routed is None:
+        return _not_yet(*(paths[n] for n in ("bench-direct", "bench-routed") if found[n] is None))
+    common = sorted(direct["result"]["groups"].keys() & routed["result"]["groups"].keys())
+    if not common:
+        raise ValueError(f"{_shown(paths['bench-direct'])} and {_shown(paths['bench-routed'])} share no group")
+    key = common[0]
+    cells, routed_cells = direct["result"]["groups"][key]["cells"], routed["result"]["groups"][key]["cells"]
+    pairs = sorted(cells.keys() & routed_cells.keys(), key=lambda p: p.split("-"))
+    table_rates = table["result"].get("rates", {}) if table is not None else {}
+    lines = ["| pair | through | route table: direct | route table: predicted | direct [95%] | routed [95%] |",
+             "|---|---|---|---|---|---|"]
+    for pair in pairs:
+        route = _route(pair, routed, table)
+        through = ", ".join(route[1:-1]) or "-"
+        rate = _pct(table_rates[pair][0] / table_rates[pair][1]) if pair in table_rates else "-"
+        d, r = cells[pair], routed_cells[pair]
+        lines.append(f"| {_arrow(pair)} | {through} | {rate} | {_predicted(route, table)} "
+                     f"| {_success(d['successes'], d['samples'])} | {_success(r['successes'], r['samples'])} |")
+    reached = [sum(c[p]["successes"] >= GOAL * c[p]["samples"] for p in pairs) for c in (cells, routed_cells)]
+    lines.append(f"| at {_pct(GOAL)}% or more | | | | {reached[0]} of {len(pairs)} | {reached[1]} of {len(pairs)} |")
+    strategy, magnitude = key.split("@")
+    notes = [f"Routed, {reached[1]} of {len(pairs)} pairs reach {_pct(GOAL)}%; directly, {reached[0]}. Both "
+             f"benchmarks: `{strategy}` at {magnitude} N, {_settings_line(routed['result']['settings'])}."]
+    if table is not None:
+        measured = table["result"].get("measured_with", {})
+        notes.append(f"The route table's rates, and its predictions (the product of the legs' rates): "
+                     f"`{table['result'].get('strategy', '?')}`, {measured.get('samples', '?')} transitions a pair, "
+                     f"seed {measured.get('seed', '?')}, falls by the `{measured.get('falls', '?')}` definition.")
+    sources = [f"- {_cite(paths[n], found[n])}" for n in ("bench-direct", "bench-routed", "routes") if found[n]]
+    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
+
+
+def _mean(values: Sequence[float | None]) -> float | None:
+    known = [v for v in values if v is not None]
+    return sum(known) / len(known) if known else None
+
+
+def _cell(value: float | None) -> str:
+    return "-" if value is None else _pct(value)
+
+
+def accuracy_table(path: Path = ACCURACY) -> str:
+    """Table (d): the transition-net's balanced validation accuracy per input, beside the paper's Table 3."""
+    path = Path(path)
+    if not path.is_file():
+        return _not_yet(path)
+    report = json.loads(path.read_text(encoding="utf-8"))
+    ours, paper = report["balanced_validation_accuracy"], report.get("paper_table_3", {})
+    kinds = [k for k in INPUTS if k in ours] + [k for k in ours if k not in INPUTS]
+    header = " | ".join(_arrow(p) for p in PAPER_PAIRS)
+    lines = [f"| input | {header} | mean of these six | mean of all pairs |", "|---|" + "---|" * 8]
+    means = {}
+    for kind in kinds:
+        row = [ours[kind].get(p) for p in PAPER_PAIRS]
+        means[kind], known = _mean(list(ours[kind].values())), sum(v is not None for v in ours[kind].values())
+        lines.append(f"| **{kind}** | " + " | ".join(_cell(v) for v in row)
+                     + f" | {_cell(_mean(row))} | {_cell(means[kind])} ({known} pairs) |")
+        if kind in paper:
+            row = [paper[kind].get(p) for p in PAPER_PAIRS]
+            lines.append(f"| {kind}, paper | " + " | ".join(_cell(v) for v in row) + f" | {_cell(_mean(row))} | - |")
+    claims = []
+    for better, worse, sign in (("latent", "explicit", ">="), ("explicit", "phase", ">")):
+        if means.get(better) is not None and means.get(worse) is not None:
+            holds = means[better] >= means[worse] if sign == ">=" else means[better] > means[worse]
+            claims.append(f"{better} {sign} {worse} {'holds' if holds else 'does not hold'} "
+                          f"({_pct(means[better])} against {_pct(means[worse])})")
+    falls = report.get("falls")
+    labels = (f"labels by the `{falls}` definition" if falls else
+              "labels by the `contact` definition (the fit predates the choice of definition)")
+    command = "gaitlib fit " + " ".join(f"--data {d}" for d in report.get("data", []))
+    command += " --ablation" if set(INPUTS) <= set(ours) else f" --input {report.get('input_written', 'latent')}"
+    command += f" --falls {falls}" if falls else ""
+    notes = [f"Means over all pairs, the paper's order: {'; '.join(claims)}." if claims else "",
+             f"`{report.get('input_written', '?')}` is the input the shipped net uses; {report.get('samples', 0):,} "
+             f"samples, {labels}."]
+    return "\n".join([*lines, "", " ".join(n for n in notes if n), "",
+                      f"Evidence: `{_shown(path)}`, written by `{command}` (the data and inputs the file records)."])
+
+
+def _fill(text: str) -> str:
+    """One paragraph or list item wrapped at :data:`WIDTH`, its inline code spans whole."""
+    kept = re.sub(r"`[^`]*`", lambda match: match.group(0).replace(" ", "\0"), " ".join(text.split("\n")))
+    lines = textwrap.wrap(kept, WIDTH, subsequent_indent="  " if text.startswith("- ") else "",
+                          break_long_words=False, break_on_hyphens=False)
+    return "\n".join(lines).replace("\0", " ")
+
+
+def _wrap(body: str) -> str:
+    """``body`` with its prose wrapped (:func:`_fill`) and its tables as they are."""
+    return "\n\n".join(p if p.startswith("|") else "\n".join(_fill(item) for item in re.split(r"\n(?=- )", p))
+                       for p in body.split("\n\n"))
+
+
+def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
+    """Every generated block's content, by name, in :data:`TABLES` order."""
+    tables = {"quality-bar": quality_bar(evidence_dir), "pairs-0n": pairs_table(evidence_dir),
+              "routes": routes_table(evidence_dir), "net-accuracy": accuracy_table(accuracy)}
+    return {name: _wrap(body) for name, body in tables.items()}
+
+
+def _block(name: str, body: str) -> str:
+    return f"<!-- table: {name} -->\n\n{body}\n\n<!-- /table -->"
+
+
+def _blocks(text: str) -> dict[str, str]:
+    """name -> the whole block as the doc holds it (markers included); one-line errors for an unknown or repeated
+    name."""
+    blocks: dict[str, str] = {}
+    for match in BLOCK.finditer(text):
+        name = match.group(1)
+        if name not in TABLES or name in blocks:
+            raise ValueError(f"the table marker '{name}' is {'repeated' if name in blocks else 'unknown'}")
+        blocks[name] = match.group(0)
+    return blocks
+
+
+def first_difference(text: str, tables: dict[str, str]) -> str | None:
+    """The first table (in the doc's order, then any the doc lacks) whose block differs from ``tables``."""
+    blocks = _blocks(text)
+    for name in [*blocks, *(n for n in tables if n not in blocks)]:
+        if blocks.get(name) != _block(name, tables[name]):
+            return name
+    return None
+
+
+def fill(text: str, tables: dict[str, str]) -> str:
+    """``text`` with every generated block made from ``tables`` (each table's markers must be there)."""
+    absent = [name for name in tables if name not in _blocks(text)]
+    if absent:
+        raise ValueError(f"no <!-- table: {absent[0]} --> ... <!-- /table --> block to write the table into")
+    return BLOCK.sub(lambda match: _block(match.group(1), tables[match.group(1)]), text)
+
+
+def check_doc(doc: Path = DOC, evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> str | None:
+    """The first table of ``doc`` that differs from what its evidence makes, or ``None`` when all agree."""
+    return first_difference(Path(doc).read_text(encoding="utf-8"), render_tables(evidence_dir, accuracy))
+
+
+def write_doc(doc: Path = DOC, evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> bool:
+    """Rewrite ``doc``'s generated blocks from the evidence (a temporary file beside it, then renamed over it);
+    whether anything changed."""
+    doc = Path(doc)
+    text = doc.read_text(encoding="utf-8")
+    filled = fill(text, render_tables(evidence_dir, accuracy))
+    if filled == text:
+        return False
+    with atomic_path(doc) as tmp:
+        tmp.write_text(filled, encoding="utf-8")
+    return True
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="change nothing; exit 1 if a table differs")
+    parser.add_argument("--doc", type=Path, default=DOC, help="the doc (default: docs/results.md)")
+    parser.add_argument("--evidence", type=Path, default=EVIDENCE, help="the stored results (docs/results/library)")
+    parser.add_argument("--accuracy", type=Path, default=ACCURACY, help="the accuracy report (the shipped library's)")
+    args = parser.parse_args(argv)
+    try:
+        name = check_doc(args.doc, args.evidence, args.accuracy) if args.check else None
+        changed = False if args.check else write_doc(args.doc, args.evidence, args.accuracy)
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        detail = f"a stored result has no {error}" if isinstance(error, KeyError) else str(error)
+        print(f"results_tables: {detail}", file=sys.stderr)
+        return 2
+    if name is not None:
+        print(f"{_shown(args.doc)}: the table '{name}' differs from what its stored evidence makes (or has no block); "
+              "python benchmarks/results_tables.py rewrites it", file=sys.stderr)
+        return 1
+    state = "every table agrees with its stored evidence" if args.check else "rewritten" if changed else "up to date"
+    print(f"{_shown(args.doc)}: {state}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
