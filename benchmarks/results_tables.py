@@ -261,7 +261,7 @@ def routes_table(evidence_dir: Path = EVIDENCE) -> str:
     if table is not None:
         measured = table["result"].get("measured_with", {})
         notes.append(f"The route table's rates, and its predictions (the product of the legs' rates): "
-                     f"`{table['result'].get('strategy', '?')}`, {measured.get('samples', '?')} transitions a pair, "
+                     f"`{table['result'].get('strategy', '?')}`, {measured.get('samples', 0):,} transitions a pair, "
                      f"seed {measured.get('seed', '?')}, falls by the `{measured.get('falls', '?')}` definition.")
     sources = [f"- {_cite(paths[n], found[n])}" for n in ("bench-direct", "bench-routed", "routes") if found[n]]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
