@@ -41,8 +41,8 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert validate(data).count == 32 and "16 new" in resumed.stderr
 
     more = str(tmp_path / "more.h5")  # a second file (as after growing the library): fitted together
-    # Gaits named out of order are stored in the canonical order (issue 11: the user's order was kept, the net was
-    # fitted for ['trot', 'stand'] and `gaitlib run` refused it).
+    # Gaits named out of order are stored in the canonical order (before 0.2.0 the user's order was kept, the net
+    # was fitted for ['trot', 'stand'] and `gaitlib run` refused it).
     named = gaitlib_quick("collect", "--samples", "16", "--gaits", "trot,stand", "--out", more, "--library", lib,
                           "--seed", "1", *QUICK)
     assert named.returncode == 0, named.stderr

@@ -1,5 +1,6 @@
-"""Collection and the benchmark sweep on Ray workers (issue 15): the same file and the same results as without Ray
-for the same seed and chunking (two workers; one in the last test), and a killed worker loses no committed sample.
+"""Collection and the benchmark sweep on Ray workers (``--ray``, since 0.2.0): the same file and the same results as
+without Ray for the same seed and chunking (two workers; one in the last test), and a killed worker loses no committed
+sample.
 Ray comes with the test install (``.[test]``), so these run in CI; the one-line refusal of ``--ray`` without Ray is
 tested in ``test_refusals.py``."""
 

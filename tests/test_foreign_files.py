@@ -1,4 +1,4 @@
-"""No silent wrong answers (issue 25): a file that is not what it claims, a second writer, a failing disk and odd
+"""No silent wrong answers: a file that is not what it claims, a second writer, a failing disk and odd
 paths each get one line before any work, and nothing already written is lost."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Bad input is refused in one line (exit code 2) before any work and before any file is written: numeric options
 out of range or not finite, option texts that name nothing, damaged checkpoints and switching files, a resumed
-benchmark with other settings (issue 12, items 5 to 7)."""
+benchmark with other settings."""
 
 from __future__ import annotations
 

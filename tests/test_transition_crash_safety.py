@@ -1,4 +1,4 @@
-"""Transition files survive any kill, have one writer at a time, and refuse damage in one line (issue 12).
+"""Transition files survive any kill, have one writer at a time, and refuse damage in one line.
 
 Kills are real SIGKILLs of forked children (a fork shares the imported modules and the tiny library, so each costs
 a fraction of a second): a child patches the write primitives the writer uses (``h5py`` dataset creation,
