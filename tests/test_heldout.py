@@ -1,4 +1,4 @@
-"""The stand-in for the real robot (issue 14, item 4): another A1 model adapted in memory, what a fall is there, a
+"""The stand-in for the real robot (paper Fig. 4, bottom): another A1 model adapted in memory, what a fall is there, a
 fixed action delay and the motor strength, and the benchmark on it; real simulator, tiny sizes."""
 
 from __future__ import annotations
