@@ -26,6 +26,7 @@ def state(n: int = 1, **values: torch.Tensor) -> SimState:
         "foot_contact": torch.zeros(n, 4, dtype=torch.bool),
         "foot_pos": torch.zeros(n, 4, 3),
         "body_contact": torch.zeros(n, dtype=torch.bool),
+        "trunk_contact": torch.zeros(n, dtype=torch.bool),
     }
     return SimState(**(fields | values))
 

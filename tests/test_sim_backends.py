@@ -38,6 +38,7 @@ def test_state_shapes_and_dtypes(make) -> None:
     assert s.joint_pos.shape == (3, 12) and s.joint_vel.shape == (3, 12)
     assert s.foot_contact.shape == (3, 4) and s.foot_contact.dtype == torch.bool
     assert s.foot_pos.shape == (3, 4, 3) and s.body_contact.shape == (3,)
+    assert s.trunk_contact.shape == (3,) and s.trunk_contact.dtype == torch.bool
     assert s.root_pos.dtype == torch.float32
     assert backend.control_dt == pytest.approx(1 / 30) and backend.substeps == 8
 
@@ -51,9 +52,29 @@ def test_stands_five_seconds_under_pd_hold(make) -> None:
     assert torch.all((s.root_pos[:, 2] > 0.23) & (s.root_pos[:, 2] < a1.STANDING_HEIGHT))
     assert torch.all(s.root_quat[:, 0].abs() > 0.999)  # upright
     assert torch.all(s.root_pos[:, :2].norm(dim=1) < 0.05)  # no drift
-    assert s.foot_contact.all() and not s.body_contact.any()
+    assert s.foot_contact.all() and not s.body_contact.any() and not s.trunk_contact.any()
     assert torch.all(s.foot_pos[..., 2] < a1.FOOT_RADIUS + 0.005)
     assert torch.all((s.joint_pos - torch.tensor(a1.DEFAULT_JOINT_POS)).abs() < 0.15)
+
+
+def test_the_trunk_on_the_ground_is_told_apart_from_a_leg_on_it(make) -> None:
+    """A robot lying on its back touches the ground with its trunk (a fall by any definition); one lowered onto
+    folded legs, its trunk held up by its thighs and calves, touches it with its legs only; a standing one with its
+    feet only."""
+    backend = make(3)
+    state = standing_state(ROBOT, 3)
+    state.root_quat[1] = torch.tensor([0.0, 1.0, 0.0, 0.0])  # upside down
+    state.root_pos[1, 2] = 0.08
+    state.joint_pos[2] = torch.tensor([0.0, 0.0, -2.7] * 4)  # thighs down, calves folded up: on its knees
+    state.root_pos[2, 2] = 0.3
+    backend.reset(torch.arange(3), state)
+    backend.set_pd_targets(state.joint_pos)
+    for _ in range(15):
+        assert not backend.step().any()
+    s = backend.state()
+    assert s.trunk_contact.tolist() == [False, True, False]
+    assert s.body_contact.tolist() == [False, True, True]
+    assert s.root_pos[2, 2] > 0.18 and not s.foot_contact[2].any()  # up on its knees, no foot down
 
 
 def test_trunk_push_changes_velocity_by_impulse_over_mass(make) -> None:

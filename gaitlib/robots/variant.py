@@ -271,6 +271,7 @@ def _replace_sensors(spec: mujoco.MjSpec, layout: _Layout, *, floor: str, trunk:
     for name in a1.FOOT_NAMES:
         contact(f"{name}_contact", geom_obj, name)
     contact("robot_contacts", mujoco.mjtObj.mjOBJ_XBODY, trunk)
+    contact("trunk_contact", mujoco.mjtObj.mjOBJ_BODY, trunk)
     for g in (g for leg in layout.stance for g in leg):
         contact(f"{geoms[g].name}_contact", geom_obj, geoms[g].name)
     for name in a1.FOOT_NAMES:

@@ -59,7 +59,9 @@ class SimState(KinematicState):
     """(N, F, 3) foot contact-sphere centres in the world frame, m."""
     body_contact: torch.Tensor
     """(N,) bool: some robot geometry other than a foot, or than one of the robot's ``stance_contact_geoms``, touches
-    the ground."""
+    the ground (a leg's touch, or the trunk's)."""
+    trunk_contact: torch.Tensor
+    """(N,) bool: a geometry of the trunk body itself touches the ground (a fall by any definition)."""
 
 
 def standing_state(robot: RobotSpec, num: int, *, device: torch.device | str = "cpu") -> KinematicState:

@@ -79,10 +79,14 @@ class MujocoBackend(SimBackend):
         self._robot_bodies = np.arange(1, base.nbody)
         self._gravity = base.opt.gravity.copy()
         self._scratch = mujoco.MjData(base)  # mj_setConst overwrites its data's state: never a world's own
-        # sensordata layout (see the MJCF): contacts per foot (F), all robot contacts (1), foot positions (F x 3)
+        # sensordata layout (see the MJCF): contacts per foot (F), all robot contacts (1), the trunk's (1), foot
+        # positions (F x 3)
         adr = {base.sensor(i).name: int(base.sensor_adr[i]) for i in range(base.nsensor)}
         self._foot_contact_adr = np.array([adr[f"{f}_contact"] for f in robot.foot_names])
         self._robot_contact_adr = adr["robot_contacts"]
+        if "trunk_contact" not in adr:
+            raise SimulationError("robot model has no contact sensor trunk_contact (its trunk's geoms and the floor)")
+        self._trunk_contact_adr = adr["trunk_contact"]
         missing = [g for g in robot.stance_contact_geoms if f"{g}_contact" not in adr]
         if missing:
             raise SimulationError(f"robot model has no contact sensor {missing[0]}_contact for its stance geom")
@@ -197,6 +201,7 @@ class MujocoBackend(SimBackend):
             foot_pos=torch.from_numpy(sensors[:, self._foot_pos_adr]).float().view(self.num_worlds, -1, 3),
             # Every robot-floor contact beyond the feet' and the stance geoms' is a body contact.
             body_contact=torch.from_numpy(sensors[:, self._robot_contact_adr] > allowed),
+            trunk_contact=torch.from_numpy(sensors[:, self._trunk_contact_adr] > 0),
         )
 
     def close(self) -> None:

@@ -209,6 +209,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
             foot_contact=self._foot_contact.clone(),
             foot_pos=self._foot_pos.clone(),
             body_contact=self._body_contact.clone(),
+            trunk_contact=self._trunk_contact.clone(),
         )
 
     def close(self) -> None:
@@ -292,10 +293,11 @@ class NewtonBackend(NewtonConstruction, SimBackend):
             self._read_contacts_and_feet(mask)
 
     def _read_contacts_and_feet(self, mask: torch.Tensor | None) -> None:
-        """Copy foot contacts, body contacts and foot positions from mujoco_warp's data (rows ``mask`` or all)."""
+        """Copy foot, body and trunk contacts and foot positions from mujoco_warp's data (rows ``mask`` or all)."""
         data = self._solver.mjw_data
         self._wp_foot_contact.zero_()
         self._wp_body_contact.zero_()
+        self._wp_trunk_contact.zero_()
         wp.launch(
             ground_contacts_kernel,
             dim=data.naconmax,
@@ -307,19 +309,22 @@ class NewtonBackend(NewtonConstruction, SimBackend):
                 self._geom_role,
                 self.robot.num_feet,
             ],
-            outputs=[self._wp_foot_contact, self._wp_body_contact],
+            outputs=[self._wp_foot_contact, self._wp_body_contact, self._wp_trunk_contact],
         )
         foot_contact = wp.to_torch(self._wp_foot_contact) != 0
         body_contact = wp.to_torch(self._wp_body_contact) != 0
+        trunk_contact = wp.to_torch(self._wp_trunk_contact) != 0
         rot = self._xmat[:, self._foot_bodies]
         foot_pos = self._xpos[:, self._foot_bodies] + (rot @ self._foot_offsets[:, :, None]).squeeze(-1)
         if mask is None:
             self._foot_contact.copy_(foot_contact)
             self._body_contact.copy_(body_contact)
+            self._trunk_contact.copy_(trunk_contact)
             self._foot_pos.copy_(foot_pos)
         else:
             self._foot_contact.copy_(torch.where(mask[:, None], foot_contact, self._foot_contact))
             self._body_contact.copy_(torch.where(mask, body_contact, self._body_contact))
+            self._trunk_contact.copy_(torch.where(mask, trunk_contact, self._trunk_contact))
             self._foot_pos.copy_(torch.where(mask[:, None, None], foot_pos, self._foot_pos))
 
     def _overflow_message(self, short: torch.Tensor) -> str:

@@ -36,7 +36,7 @@ __all__ = [
 _ROLE_OTHER = wp.constant(-1)
 """Contact role of a geom that is neither the floor nor part of the robot."""
 _ROLE_FLOOR = wp.constant(-2)
-"""Contact role of the floor geom (feet are 0..F-1, other robot geoms F)."""
+"""Contact role of the floor geom (feet are 0..F-1, the legs' other geoms F, the trunk's F + 1)."""
 
 
 @wp.kernel
@@ -49,8 +49,10 @@ def ground_contacts_kernel(
     num_feet: int,
     foot_contact: wp.array2d[wp.int32],
     body_contact: wp.array[wp.int32],
+    trunk_contact: wp.array[wp.int32],
 ):
-    """Flag floor contacts per world: role k < num_feet is foot k, role num_feet any other robot geom."""
+    """Flag floor contacts per world: role k < num_feet is foot k, role num_feet a leg's other geom, role
+    num_feet + 1 a trunk geom (a body contact too)."""
     i = wp.tid()
     if i >= nacon[0]:
         return
@@ -71,6 +73,9 @@ def ground_contacts_kernel(
         foot_contact[world, other] = 1
     elif other == num_feet:
         body_contact[world] = 1
+    elif other == num_feet + 1:
+        body_contact[world] = 1
+        trunk_contact[world] = 1
 
 
 @dataclass(frozen=True)
@@ -158,7 +163,8 @@ def geom_roles(template: RobotTemplate, shape_of_mj: list[int], num_feet: int) -
         elif shape in template.foot_geoms:
             roles.append(template.foot_geoms.index(shape))
         else:
-            roles.append(num_feet if template.builder.shape_body[shape] >= 0 else _ROLE_OTHER)
+            body = template.builder.shape_body[shape]
+            roles.append(_ROLE_OTHER if body < 0 else num_feet + 1 if body == template.trunk else num_feet)
     return wp.array(roles, dtype=wp.int32)
 
 
@@ -283,8 +289,10 @@ class NewtonConstruction:
         self._wp_articulation_mask = wp.from_torch(self._mask[:n], dtype=wp.bool)
         self._wp_foot_contact = wp.zeros((n, nf), dtype=wp.int32)
         self._wp_body_contact = wp.zeros(n, dtype=wp.int32)
+        self._wp_trunk_contact = wp.zeros(n, dtype=wp.int32)
         self._foot_contact = torch.zeros(n, nf, dtype=torch.bool, device=self.device)
         self._body_contact = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._trunk_contact = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._foot_pos = torch.zeros(n, nf, 3, device=self.device)
         self._reset_state = standing_state(self.robot, n, device=self.device)
 
