@@ -15,7 +15,6 @@ from gaitlib.benchmark.report import (
     success_matrix,
     success_table,
     summary,
-    wilson_interval,
     write_csv,
     write_matrix,
     write_plot,
@@ -24,6 +23,7 @@ from gaitlib.benchmark.results import load_results
 from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.errors import GaitlibError
 from gaitlib.meta import TrialProtocol, load_switching
+from gaitlib.stats import wilson_interval
 
 TINY = SweepConfig(
     strategies=("random", "net"),
@@ -55,7 +55,7 @@ def test_wilson_interval_matches_hand_computed_values() -> None:
 
 def test_the_net_margin_has_a_hand_computed_interval() -> None:
     def cell(strategy: str, magnitude: float, successes: int, pair: str = "trot-stand") -> CellResult:
-        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0)
+        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0, 0.0, 0, 1, 0.0)
 
     rows = [cell("net", 0, 90), cell("net", 100, 50), cell("tmt", 0, 80), cell("tmt", 100, 40)]
     rows.append(cell("random", 0, 100, pair="pace-stand"))  # better, but on another pair
@@ -82,7 +82,7 @@ def test_the_net_margin_has_a_hand_computed_interval() -> None:
 
 def test_the_pair_matrix_puts_each_cell_at_its_source_row_and_destination_column(tmp_path) -> None:
     def cell(strategy: str, pair: str, magnitude: float, successes: int) -> CellResult:
-        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0)
+        return CellResult(strategy, pair, magnitude, 100, successes, successes / 100, 0, 1, 0, 0, 0, 0.0, 0, 1, 0.0)
 
     rows = [cell("net", "trot-stand", 0, 90), cell("net", "stand-pace", 0, 80), cell("net", "trot-stand", 100, 10)]
     rows.append(cell("random", "pace-trot", 0, 70))

@@ -17,7 +17,7 @@ def test_train_then_eval_json(tmp_path) -> None:
         "--library", str(library), "--run-dir", runs,
     )
     assert trained.returncode == 0, trained.stderr
-    assert "after 2 iterations, 64 samples" in trained.stderr and "fall rate" in trained.stderr
+    assert "after 2 iterations, 64 samples" in trained.stderr and "falls 0.000 (trunk), touches" in trained.stderr
     assert "gaitlib: reference check of stand: 0.0 deg of roll and 0.0 deg of pitch" in trained.stderr
     meta = json.loads((library / "stand" / "metadata.json").read_text())
     assert meta["training"]["preset"]["name"] == "tiny" and meta["training"]["iterations"] == 2

@@ -106,8 +106,14 @@ def test_calves_on_the_ground_in_stance_are_no_fall_but_lying_on_the_back_is(var
         assert s.foot_pos[0, :, 2].max() < a1.FOOT_RADIUS - 0.005  # which sink more than 5 mm
         assert s.body_contact.tolist() == [standing_falls, True]
         upright = torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(2, 1)
-        fell = fallen(s.body_contact, s.root_pos[:, 2], s.root_quat, upright, TerminationConfig(heading=False))
+        fell = fallen(s.body_contact, s.trunk_contact, s.root_pos[:, 2], s.root_quat, upright,
+                      TerminationConfig(heading=False))
         assert fell.tolist() == [standing_falls, True]  # without its stance geoms, the standing robot's calves fall
+        # ... by gaitlib's strict definition; by the field's (the default) a calf's touch is no fall, the back is.
+        assert s.trunk_contact.tolist() == [False, True]
+        trunk = TerminationConfig(heading=False).counting("trunk")
+        fell = fallen(s.body_contact, s.trunk_contact, s.root_pos[:, 2], s.root_quat, upright, trunk)
+        assert fell.tolist() == [False, True]
 
 
 def _rename_knee(spec: mujoco.MjSpec) -> None:

@@ -58,7 +58,7 @@ def test_the_map_counts_each_switch_in_its_bins() -> None:
 
 def test_empty_bins_are_null_in_json_and_the_plot_is_written(tmp_path) -> None:
     maps = transition_maps(SAMPLES, bins=4)
-    written = json.loads(write_map_json(maps, tmp_path / "map.json", source="x.h5").read_text())
+    written = json.loads(write_map_json(maps, tmp_path / "map.json", source="x.h5", falls="trunk").read_text())
     assert written["source"] == "x.h5" and written["fall_after_s_q99"] == pytest.approx(1.191)
     assert written["pairs"][0]["grid_success"][0][0] is None  # stand-trot: one sample, in bin (1, 2)
     assert written["pairs"][0]["grid_success"][1][2] == 1.0

@@ -52,7 +52,8 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
     table = load_routes(library, ("stand", "trot"))
     assert table.route("trot", "stand") == ("stand",)
     shown = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)["routes"]
-    assert shown == {"state": "current", "strategy": "net-lookahead", "push_n": 0.0, "detours": {}}
+    assert shown == {"state": "current", "strategy": "net-lookahead", "push_n": 0.0, "detours": {},
+                     "falls": "trunk"}
 
     accuracy = library.accuracy_path
     accuracy.write_text(accuracy.read_text() + " ")  # as a refit would: other switching models, checksums and all
@@ -133,16 +134,18 @@ def test_a_routed_sweep_records_its_routes_and_resumes_only_with_them(tmp_path) 
         run_sweep(tmp_path / "bench", setup, dataclasses.replace(config, routes={}))
     with pytest.raises(GaitlibError, match="does not lead from one gait to another as trot-pace"):
         dataclasses.replace(config, routes={"trot-pace": ("trot", "stand")})
-    with pytest.raises(GaitlibError, match="falls 'legs': contact or trunk"):
+    with pytest.raises(GaitlibError, match="falls 'legs': trunk or contact"):
         dataclasses.replace(config, falls="legs")
-    trunk = run_sweep(tmp_path / "trunk", setup, dataclasses.replace(config, falls="trunk"))
-    assert trunk["settings"]["falls"] == "trunk" and "falls" not in results["settings"]  # old sweeps still resume
-    assert trunk["groups"]["random@0"]["cells"]["trot-pace"]["samples"] == 3
+    strict = run_sweep(tmp_path / "strict", setup, dataclasses.replace(config, falls="contact"))
+    assert strict["settings"]["falls"] == "contact" and results["settings"]["falls"] == "trunk"  # the default
+    cell = strict["groups"]["random@0"]["cells"]["trot-pace"]
+    assert cell["samples"] == 3 and 0 <= cell["touched"] <= 3 and cell["longest_touch_s"] >= 0
 
 
 def _outcome(world: int, leg: int, success: bool) -> TrialOutcome:
     return TrialOutcome(world=torch.tensor([world]), pair=torch.tensor([leg]), success=torch.tensor([success]),
-                        fall_after_s=torch.tensor([torch.inf if success else 0.5]), max_push=torch.zeros(1))
+                        fall_after_s=torch.tensor([torch.inf if success else 0.5]), max_push=torch.zeros(1),
+                        touched=torch.tensor([False]), longest_touch_s=torch.zeros(1))
 
 
 def test_a_fall_between_the_legs_fails_the_routed_transition_once_and_the_world_takes_another() -> None:

@@ -189,7 +189,7 @@ def synthetic_data(n: int = 4000, seed: int = 0) -> TransitionData:
 
 def test_table_built_from_data_counts_outcomes_and_calibrates_thresholds(tmp_path) -> None:
     data = synthetic_data()
-    table = build_table(data, identities=IDENTITIES, source="synthetic")
+    table = build_table(data, identities=IDENTITIES, source="synthetic", falls="trunk")
     assert table.counts.sum() == 4000 and table.successes.sum() == data.samples.success.sum()
     assert table.typical_value.tolist() == pytest.approx([2.0, 2.0])
     # values of successes are about 1.0 (normalized), of failures about 0.5: the threshold falls between
@@ -209,7 +209,7 @@ def test_a_pair_that_never_fails_is_always_switched_and_its_table_is_strict_json
     # and +inf (never), written as strings JSON can hold and read back as the same decisions.
     data = synthetic_data()
     data.samples.success[:] = (data.samples.source == 0).astype(np.uint8)
-    table = build_table(data, identities=IDENTITIES, source="synthetic")
+    table = build_table(data, identities=IDENTITIES, source="synthetic", falls="trunk")
     assert table.thresholds["tmt"] == {(0, 1): -math.inf, (1, 0): math.inf}
     path = save_table(tmp_path / "tmt.json", table)
     strict = json.loads(path.read_text(), parse_constant=lambda name: pytest.fail(f"{name} is not JSON"))
@@ -223,7 +223,8 @@ def test_a_pair_that_never_fails_is_always_switched_and_its_table_is_strict_json
 
 
 def test_a_table_for_other_policies_or_a_foreign_file_is_refused(tmp_path) -> None:
-    path = save_table(tmp_path / "tmt.json", build_table(synthetic_data(400), identities=IDENTITIES, source="x"))
+    table = build_table(synthetic_data(400), identities=IDENTITIES, source="x", falls="trunk")
+    path = save_table(tmp_path / "tmt.json", table)
     with pytest.raises(TransitionDataError, match="another 'trot' policy"):
         load_table(path, identities={"stand": "a" * 64, "trot": "c" * 64})
     foreign = tmp_path / "foreign.json"
@@ -279,7 +280,7 @@ def test_calibration_undoes_the_balanced_prior() -> None:
     data = TransitionData(TransitionFileInfo(HEADER, n, [], None), batch)
     failures, successes = np.flatnonzero(~success), np.flatnonzero(success)
     train = np.r_[failures[: int(0.8 * len(failures))], successes[: int(0.8 * len(failures))]]  # balanced
-    calibration = calibrate(constant_net(0.5), data, train_rows=train, identities=IDENTITIES)
+    calibration = calibrate(constant_net(0.5), data, train_rows=train, identities=IDENTITIES, falls="trunk")
     p = calibration.probability(torch.tensor([1]), torch.tensor([0]), torch.tensor([0.5]))
     assert p.item() == pytest.approx(success.mean(), abs=0.02)
     assert calibration.info["pairs"]["trot-stand"]["held_out"] == n - len(train)

@@ -222,18 +222,23 @@ def test_eval_counts_each_fall_under_the_terminations_it_met() -> None:
 
     library = Library(shipped_library_dir())
     trot = library.entry("trot")
-    result = evaluate_policy(  # pushes far beyond what the trot rides out: most episodes fall
+    result = evaluate_policy(  # pushes far beyond what the trot rides out: most episodes fall, strictly counted
         trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
-        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, seed=0,
+        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, falls="contact", seed=0,
     )
     falls = round(result.fall_rate * result.episodes)
     causes = result.falls_by_cause
-    assert set(causes) == {"body_contact", "too_low", "orientation_lost", "diverged"} and falls > 0
+    assert set(causes) == {"body_contact", "trunk_contact", "too_low", "orientation_lost", "diverged"} and falls > 0
     assert all(0 <= n <= falls for n in causes.values()) and sum(causes.values()) >= falls  # each fall has a cause
-    assert causes["body_contact"] > 0 and result.body_contact_falls
-    trunk = evaluate_policy(  # the same, a leg's or a thigh's touch ridden through: only the trunk ends an episode
+    assert causes["body_contact"] > 0 and result.falls == "contact"
+    # A strict fall is a touch too: every episode that fell touched the ground with a non-foot body or the trunk fell.
+    assert result.touch_rate * 8 >= causes["body_contact"] and result.longest_touch_s > 0
+    trunk = evaluate_policy(  # the default, the field's: a leg's touch ridden through, only the trunk ends an episode
         trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
-        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, body_contact_falls=False, seed=0,
+        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, seed=0,
     )
-    assert trunk.falls_by_cause["body_contact"] == 0 and not trunk.body_contact_falls
-    assert trunk.falls_by_cause["too_low"] + trunk.falls_by_cause["orientation_lost"] >= trunk.fall_rate * 8
+    assert trunk.falls_by_cause["body_contact"] == 0 and trunk.falls == "trunk"
+    trunk_causes = sum(trunk.falls_by_cause[c] for c in ("trunk_contact", "too_low", "orientation_lost", "diverged"))
+    assert trunk_causes >= trunk.fall_rate * 8 and trunk.touch_rate > 0
+    low, high = trunk.touch_ci95
+    assert low <= trunk.touch_rate <= high and trunk.fall_ci95[0] <= trunk.fall_rate <= trunk.fall_ci95[1]

@@ -112,7 +112,7 @@ def test_appended_batches_read_back_exactly(tmp_path) -> None:
     assert parts == ["part-000000000000-000000000005.h5", "part-000000000005-000000000012.h5"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5", "t.h5.parts"]  # the lock went with the writer
     with h5py.File(path) as f:
-        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION == 3
+        assert f.attrs["schema"] == schema.SCHEMA_NAME and f.attrs["schema_version"] == schema.SCHEMA_VERSION == 4
         assert f.attrs["count"] == 12 and [int(r) for r in f["parts"]["rows"]] == [5, 7]
     with h5py.File(schema.parts_folder(path) / parts[1]) as f:
         ds = f["latent"]
@@ -180,10 +180,10 @@ def test_foreign_and_non_hdf5_files_are_clear_errors(tmp_path) -> None:
 
 def test_other_schema_versions_are_clear_errors(tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(5))
-    for version in (1, 2, 4):
+    for version in (1, 2, 3, 5):
         with h5py.File(path, "r+") as f:
             f.attrs["schema_version"] = version
-        assert f"schema version {version}; this gaitlib reads version 3 only" in one_line_error(path)
+        assert f"schema version {version}; this gaitlib reads version 4 only" in one_line_error(path)
         before = path.read_bytes()
         with pytest.raises(TransitionDataError, match=rf"schema version {version}; .*collect into a new file"):
             open_writer(path, header=HEADER)
@@ -239,6 +239,12 @@ def test_collection_writes_a_valid_file_with_both_labels(library, interrupted) -
     falls = s.fall_after[s.success == 0]
     assert np.all((falls > 0) & (falls <= QUICK.protocol.horizon_s + DT + 1e-4))
     np.testing.assert_allclose(falls * 30, np.round(falls * 30), atol=1e-3)
+    # Both outcomes: by the contact definition a switch also fails on any touch of a non-foot body, and only then.
+    touched = s.longest_touch > 0
+    np.testing.assert_array_equal(s.success_contact, s.success & ~touched)
+    assert np.all((s.longest_touch >= 0) & (s.longest_touch <= QUICK.protocol.horizon_s + QUICK.protocol.deadline_s))
+    np.testing.assert_allclose(s.longest_touch * 30, np.round(s.longest_touch * 30), atol=1e-3)  # whole steps
+    assert read(path).labelled("contact").samples.success.tolist() == s.success_contact.tolist()
 
 
 def test_interrupted_collection_resumes_without_loss_or_duplicates(interrupted) -> None:

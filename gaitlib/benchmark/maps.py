@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import null_for_nan, save_figure, write_json
-from gaitlib.benchmark.report import wilson_interval
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import observations as obs_fn
 from gaitlib.robots.a1.constants import LEG_NAMES
+from gaitlib.stats import wilson_interval
 from gaitlib.transitions import TransitionData
 from gaitlib.transitions.explicit import EXPLICIT_DIM
 
@@ -67,6 +68,8 @@ class PairMap:
     """By the feet on the ground just before the switch (legs in contact, e.g. ``FR+RL``; ``none``: flight)."""
     fall_after_s: list[float]
     """Times from the switch to each switch-caused fall, s, sorted (files that did not record them: empty)."""
+    touches: Rate
+    """Share of switches in which a non-foot body touched the ground from the request to the verdict."""
 
     def best_worst_source_bins(self, *, min_samples: int = 1) -> tuple[Rate, Rate]:
         """The source-phase bins of highest and lowest success among those with at least ``min_samples``."""
@@ -74,9 +77,10 @@ class PairMap:
         return max(filled, key=lambda r: r.rate), min(filled, key=lambda r: r.rate)
 
 
-def transition_maps(data: TransitionData, *, bins: int = 10) -> list[PairMap]:
-    """The map of every ordered pair present in ``data``, in the file's pair order (source, then destination)."""
-    s = data.samples
+def transition_maps(data: TransitionData, *, bins: int = 10, falls: str = DEFAULT_FALLS) -> list[PairMap]:
+    """The map of every ordered pair present in ``data``, in the file's pair order (source, then destination), a
+    success being no fall by the definition ``falls``."""
+    s = data.labelled(falls).samples
     gaits = data.header.gaits
     if s.explicit.shape[1] != EXPLICIT_DIM:
         raise ValueError(f"explicit state of width {s.explicit.shape[1]}, expected {EXPLICIT_DIM}")
@@ -108,6 +112,7 @@ def transition_maps(data: TransitionData, *, bins: int = 10) -> list[PairMap]:
                 by_dest_phase=[Rate.of(ok[db == b]) for b in range(bins)],
                 by_contacts={label: Rate.of(ok[labels == label]) for label in sorted(set(labels.tolist()))},
                 fall_after_s=sorted(float(t) for t in falls[np.isfinite(falls)]),
+                touches=Rate.of(s.longest_touch[rows] > 0),
             )
         )
     return maps
@@ -120,10 +125,12 @@ def fall_time_quantile(maps: list[PairMap], q: float = 0.99) -> float | None:
     return float(np.quantile(times, q)) if times else None
 
 
-def write_map_json(maps: list[PairMap], path: Path, *, source: str) -> Path:
-    """Write the maps (with the 99% fall time and the file they were read from) as JSON, atomically."""
+def write_map_json(maps: list[PairMap], path: Path, *, source: str, falls: str) -> Path:
+    """Write the maps (with the 99% fall time, the definition of a fall and the file they were read from) as JSON,
+    atomically."""
     body = {
         "source": source,
+        "falls": falls,
         "fall_after_s_q99": fall_time_quantile(maps),
         "pairs": [asdict(m) for m in maps],
     }

@@ -5,9 +5,10 @@ The paper's protocol (and ``gaitlib eval --push``) pushes every 1-3 s with up to
 (https://github.com/leggedrobotics/legged_gym: ``push_robots``, a velocity kick of up to 1 m/s) and Isaac Lab train
 for. Here each episode meets a single push: after :data:`SETTLE_S` of walking, at a uniformly random moment of the
 next gait cycle (so every phase is hit), a horizontal force of ``impulse / duration`` in a uniformly random direction
-for ``duration``; the episode then runs :data:`AFTER_S` more. A fall is any termination before the end (a gait that
-falls unpushed counts too: the 0 N s point shows it). Directions are reported in four sectors of the robot's heading
-at the push: front (pushed forward), back, left, right.
+for ``duration``; the episode then runs :data:`AFTER_S` more. A fall is any termination before the end, by the
+definition asked for (``trunk`` by default; a gait that falls unpushed counts too: the 0 N s point shows it); the
+episodes in which a non-foot body touched the ground are counted beside. Directions are reported in four sectors of
+the robot's heading at the push: front (pushed forward), back, left, right.
 """
 
 from __future__ import annotations
@@ -18,13 +19,14 @@ from dataclasses import asdict, dataclass, replace
 
 import torch
 
-from gaitlib.benchmark.report import wilson_interval
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
+from gaitlib.stats import wilson_interval
 
 __all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "single_push_curve", "write_push_plot"]
 
@@ -51,6 +53,14 @@ class PushPoint:
     """Wilson 95% interval of the fall rate."""
     by_sector: dict[str, tuple[int, int]]
     """Sector -> (falls, episodes)."""
+    touches: int
+    """Episodes in which a non-foot body touched the ground while the robot was up (a fall or not)."""
+    touch_ci95: tuple[float, float]
+    """Wilson 95% interval of ``touches / episodes``."""
+    longest_touch_s: float
+    """The longest unbroken touch over the episodes, s."""
+    falls_definition: str = DEFAULT_FALLS
+    """What a fall was (``trunk`` or ``contact``, :data:`gaitlib.defaults.FALL_DEFINITIONS`)."""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -66,13 +76,15 @@ def single_push_curve(
     duration_s: float = 0.1,
     backend: str = "auto",
     seed: int = 0,
+    falls: str = DEFAULT_FALLS,
 ) -> list[PushPoint]:
     """The fall rate of ``policy`` under one push of each impulse in ``impulses`` (N s), ``episodes`` episodes (one
-    world each) per impulse, under paper Table 1 randomization (``env_cfg`` holds the policy's settings)."""
+    world each) per impulse, under paper Table 1 randomization (``env_cfg`` holds the policy's settings); a fall by
+    the definition ``falls``."""
     cycle_s = 1.0 / clip.phase_rate
     seconds = SETTLE_S + cycle_s + duration_s + AFTER_S
     cfg = replace(env_cfg, episode_seconds=seconds, pushes=PushConfig(max_force=0.0),
-                  termination=replace(env_cfg.termination, heading=False))
+                  termination=env_cfg.termination.counting(falls, heading=False))
     return [
         _point(policy, clip, cfg, impulse, episodes, duration_s, cycle_s, backend, seed + k)
         for k, impulse in enumerate(impulses)
@@ -92,6 +104,8 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
         force = impulse / (length * dt)
         alive = torch.ones(n, dtype=torch.bool, device=dev)
         fell = torch.zeros(n, dtype=torch.bool, device=dev)
+        touched = torch.zeros(n, dtype=torch.bool, device=dev)
+        run, longest = torch.zeros(n, device=dev), torch.zeros(n, device=dev)
         obs = env.get_observations()
         with torch.inference_mode():
             for step in range(env.max_episode_length):
@@ -106,14 +120,19 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
                     env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
                 obs, _, dones, extras = env.step(policy.act(obs))
                 fell |= dones & ~extras["time_outs"] & alive
+                touch = extras["touch"].to(dev) & alive
+                touched |= touch
+                run = torch.where(touch, run + 1, 0.0)
+                longest = torch.maximum(longest, run)
                 alive &= ~dones
     finally:
         sim.close()
     sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
     fell = fell.cpu()
     by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
-    falls = int(fell.sum())
-    return PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector)
+    falls, touches = int(fell.sum()), int(touched.sum())
+    return PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector, touches,
+                     wilson_interval(touches, n), float(longest.max()) * dt, cfg.termination.falls)
 
 
 def write_push_plot(curves: dict[str, list[PushPoint]], path) -> None:

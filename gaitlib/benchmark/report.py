@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import atomic_path, save_figure
+from gaitlib.stats import Z95, wilson_interval
 
 __all__ = [
     "NET_STRATEGIES",
@@ -22,25 +23,10 @@ __all__ = [
     "success_matrix",
     "success_table",
     "summary",
-    "wilson_interval",
     "write_csv",
     "write_matrix",
     "write_plot",
 ]
-
-_Z95 = 1.959963984540054
-
-
-def wilson_interval(successes: int, samples: int, z: float = _Z95) -> tuple[float, float]:
-    """95% (by default) Wilson score interval of a success rate; (0, 1) without samples."""
-    if samples == 0:
-        return 0.0, 1.0
-    p = successes / samples
-    denominator = 1 + z * z / samples
-    centre = (p + z * z / (2 * samples)) / denominator
-    half = z * math.sqrt(p * (1 - p) / samples + z * z / (4 * samples * samples)) / denominator
-    # The interval holds p exactly; rounding alone could put a bound past it (5.6e-17 above p = 0, say).
-    return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
 
 
 @dataclass(frozen=True)
@@ -61,6 +47,12 @@ class CellResult:
     mean_wait_s: float
     """Mean time from request to switch over the transitions that switched, s."""
     source_falls: int
+    touch_rate: float
+    """Share of transitions in which a non-foot body touched the ground from the request to the verdict."""
+    touch_ci95_low: float
+    touch_ci95_high: float
+    longest_touch_s: float
+    """The longest unbroken touch of the cell, s."""
 
 
 def cell_results(results: dict) -> list[CellResult]:
@@ -70,6 +62,7 @@ def cell_results(results: dict) -> list[CellResult]:
     for group in results["groups"].values():
         for pair, c in group["cells"].items():
             low, high = wilson_interval(c["successes"], c["samples"])
+            touch_low, touch_high = wilson_interval(c["touched"], c["samples"])
             rows.append(
                 CellResult(
                     strategy=group["strategy"],
@@ -83,16 +76,21 @@ def cell_results(results: dict) -> list[CellResult]:
                     forced_rate=c["forced"] / c["switched"] if c["switched"] else 0.0,
                     mean_wait_s=c["wait_s"] / c["switched"] if c["switched"] else float("nan"),
                     source_falls=c["source_falls"],
+                    touch_rate=c["touched"] / c["samples"] if c["samples"] else float("nan"),
+                    touch_ci95_low=touch_low,
+                    touch_ci95_high=touch_high,
+                    longest_touch_s=c["longest_touch_s"],
                 )
             )
     return rows
 
 
-def success_table(rows: list[CellResult]) -> dict[str, dict[str, dict[str, float]]]:
-    """strategy -> pair -> magnitude (as ``"%g"``) -> success rate."""
+def success_table(rows: list[CellResult], *, field: str = "success_rate") -> dict[str, dict[str, dict[str, float]]]:
+    """strategy -> pair -> magnitude (as ``"%g"``) -> success rate (or another ``field`` of the cells, such as
+    ``touch_rate``)."""
     table: dict[str, dict[str, dict[str, float]]] = {}
     for r in rows:
-        table.setdefault(r.strategy, {}).setdefault(r.pair, {})[f"{r.magnitude_n:g}"] = r.success_rate
+        table.setdefault(r.strategy, {}).setdefault(r.pair, {})[f"{r.magnitude_n:g}"] = getattr(r, field)
     return table
 
 
@@ -101,11 +99,13 @@ NET_STRATEGIES = ("net", "net-lookahead")
 
 
 def summary(rows: list[CellResult], *, focus: tuple[str, ...] = NET_STRATEGIES) -> dict:
-    """Mean success over magnitudes per strategy and pair, the ranking by overall mean, and for each strategy of
+    """Mean success (and mean touch rate) over magnitudes per strategy and pair, the ranking by overall mean success,
+    and for each strategy of
     ``focus`` that ran, per pair, its margins over the best other strategy and over ``random`` (percentage points),
     each with the half-width of its 95% interval (normal approximation, the two strategies' cells taken as
     independent binomials: conservative under the sweep's common random numbers), where those exist."""
     means: dict[str, dict[str, float]] = {}
+    touches: dict[str, dict[str, float]] = {}
     variances: dict[str, dict[str, float]] = {}  # of each mean
     for strategy in dict.fromkeys(r.strategy for r in rows):
         per_pair: dict[str, list[CellResult]] = {}
@@ -113,6 +113,7 @@ def summary(rows: list[CellResult], *, focus: tuple[str, ...] = NET_STRATEGIES) 
             if r.strategy == strategy:
                 per_pair.setdefault(r.pair, []).append(r)
         means[strategy] = {pair: sum(r.success_rate for r in v) / len(v) for pair, v in per_pair.items()}
+        touches[strategy] = {pair: sum(r.touch_rate for r in v) / len(v) for pair, v in per_pair.items()}
         variances[strategy] = {pair: _variance_of_mean(v) for pair, v in per_pair.items()}
     overall = {s: sum(p.values()) / len(p) for s, p in means.items()}
     margins: dict[str, dict[str, dict]] = {}
@@ -129,6 +130,8 @@ def summary(rows: list[CellResult], *, focus: tuple[str, ...] = NET_STRATEGIES) 
     return {
         "mean_success": means,
         "overall": overall,
+        "mean_touch": touches,
+        "overall_touch": {s: sum(p.values()) / len(p) for s, p in touches.items()},
         "ranking": sorted(overall, key=overall.get, reverse=True),
         "margins": margins,
     }
@@ -136,7 +139,7 @@ def summary(rows: list[CellResult], *, focus: tuple[str, ...] = NET_STRATEGIES) 
 
 def _margin(means: dict, variances: dict, pair: str, strategy: str, other: str) -> dict:
     """``strategy``'s mean success on ``pair`` less ``other``'s, in percentage points, with its 95% half-width."""
-    half = _Z95 * math.sqrt(variances[strategy][pair] + variances[other][pair])
+    half = Z95 * math.sqrt(variances[strategy][pair] + variances[other][pair])
     return {"margin_pp": 100 * (means[strategy][pair] - means[other][pair]), "ci95_pp": 100 * half}
 
 

@@ -11,7 +11,8 @@ from gaitlib.errors import GaitlibError
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "group_key", "load_results", "open_results"]
 
 FORMAT_NAME = "gaitlib.benchmark"
-FORMAT_VERSION = 2  # 2: pushes from push_lead_s before the request until deadline_s after it
+FORMAT_VERSION = 3  # 2: pushes from push_lead_s before the request until deadline_s after it; 3: touches per cell,
+# the definition of a fall always in the settings
 
 
 def group_key(strategy: str, magnitude: float) -> str:

@@ -20,10 +20,10 @@ from itertools import pairwise, product
 from pathlib import Path
 
 from gaitlib.atomic import file_sha256, read_json, write_json
-from gaitlib.benchmark.report import wilson_interval
 from gaitlib.benchmark.results import group_key
 from gaitlib.errors import GaitlibError
 from gaitlib.library.store import Library
+from gaitlib.stats import wilson_interval
 
 __all__ = ["ROUTES_FILE", "RouteTable", "load_routes", "routes_from_results"]
 
@@ -134,7 +134,7 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         switching=_switching_identity(library),
         measured_with={k: results["settings"][k] for k in ("samples", "seed", "num_worlds", "warmup_s",
                                                            "source_extra_s", "horizon_s", "deadline_s")}
-        | {"falls": results["settings"].get("falls", "contact")},
+        | {"falls": results["settings"]["falls"]},
     )
 
 

@@ -34,7 +34,7 @@ from gaitlib.atomic import release_lock, stale_temporaries, take_lock, write_jso
 from gaitlib.benchmark.gap import DeploymentGap
 from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
-from gaitlib.defaults import COMPARED
+from gaitlib.defaults import COMPARED, DEFAULT_FALLS, FALL_DEFINITIONS
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
@@ -89,10 +89,11 @@ class SweepConfig:
     """Torch device of the backend (``None``: its default)."""
     seed: int = 0
     """Base seed; each magnitude derives its own from it (the same for every strategy)."""
-    falls: str = "contact"
-    """What ends a transition as a fall: ``contact``, a non-foot body on the ground or the trunk too low or turned
-    away (gaitlib's training and labels); ``trunk``, only the trunk too low or turned away, a leg's touch ridden
-    through (legged_gym's A1: :class:`~gaitlib.envs.terminations.TerminationConfig`)."""
+    falls: str = DEFAULT_FALLS
+    """What ends a transition as a fall (:data:`gaitlib.defaults.FALL_DEFINITIONS`): ``trunk``, the trunk too low,
+    turned away or on the ground, a leg's touch ridden through (the field's: legged_gym's and Isaac Lab's A1);
+    ``contact``, any non-foot body on the ground too (gaitlib's strict definition). Touches are counted beside
+    either way."""
     routes: dict[str, tuple[str, ...]] = field(default_factory=dict)
     """``"m-n"`` -> the gaits (m, ..., n) a transition of that pair switches through, each switch with the group's
     strategy, one after the other on the same robot (:mod:`gaitlib.benchmark.routes`); the other pairs switch
@@ -123,8 +124,8 @@ class SweepConfig:
             raise GaitlibError(
                 "the horizon must be at least the deadline, so that outcomes cover the disturbance window"
             )
-        if self.falls not in ("contact", "trunk"):
-            raise GaitlibError(f"falls '{self.falls}': contact or trunk")
+        if self.falls not in FALL_DEFINITIONS:
+            raise GaitlibError(f"falls '{self.falls}': {' or '.join(FALL_DEFINITIONS)}")
         for pair, path in self.routes.items():
             if len(path) < 2 or f"{path[0]}-{path[-1]}" != pair or any(a == b for a, b in itertools.pairwise(path)):
                 raise GaitlibError(f"the route {' -> '.join(path)} does not lead from one gait to another as {pair}")
@@ -137,7 +138,7 @@ class SweepConfig:
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        defaults = (() if self.routes else ("routes",)) + (("falls",) if self.falls == "contact" else ())
+        defaults = () if self.routes else ("routes",)
         for name in ("backend", "device", "gap", "protocol", *defaults):  # defaults: sweeps from before they existed
             fixed.pop(name)
         protocol = asdict(self.protocol)
@@ -161,6 +162,11 @@ class CellCounts:
     """Switches made (the other requests fell while waiting; a routed transition makes one a leg it reaches)."""
     source_falls: int = 0
     """Source runs that fell before a transition's first request (redone, not counted in ``samples``)."""
+    touched: int = 0
+    """Transitions in which a non-foot body touched the ground from a request to its verdict (a fall by the
+    ``contact`` definition, ridden through or not by the ``trunk`` one)."""
+    longest_touch_s: float = 0.0
+    """The longest unbroken touch over the cell's transitions, s."""
 
 
 def run_sweep(
@@ -289,7 +295,7 @@ def _run_group(
     sim = make_backend(cfg.backend_name(), num_worlds=cfg.num_worlds, robot=robot, device=cfg.device)
     try:
         pushes = cfg.protocol.pushes(magnitude, fixed=True)
-        termination = TerminationConfig(body_contact=cfg.falls == "contact")
+        termination = TerminationConfig().counting(cfg.falls)
         env_cfg = EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes, termination=termination)
         env = cfg.gap.make_env(setup, sim, env_cfg, seed=seed)
         controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed)
@@ -321,6 +327,7 @@ class CellSchedule(TrialSchedule):
         self.started = [0] * len(routes)  # transitions begun (finished or under way) per pair
         self.ended = 0
         self._going_on: dict[int, int] = {}  # world -> the leg it goes on with, after a leg that stayed up
+        self._touches: dict[int, float] = {}  # world -> its routed transition's longest touch so far, s (-1: none)
 
     def _counts(self, leg: int) -> CellCounts:
         return self.cells[self.names[self._cell[leg]]]
@@ -345,29 +352,35 @@ class CellSchedule(TrialSchedule):
 
     def source_fell(self, worlds: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
         again = [leg == self._first[self._cell[leg]] for leg in pairs.tolist()]
-        for leg, first in zip(pairs.tolist(), again, strict=True):
+        for world, leg, first in zip(worlds.tolist(), pairs.tolist(), again, strict=True):
             if first:  # before the transition's first request: run it again, uncounted
                 self._counts(leg).source_falls += 1
             else:  # in the gait between two legs: the transition failed
-                self._count(leg, False)
+                self._count(leg, False, self._touches.pop(world, -1.0))
         if not all(again):
             self.report(self.ended)
         return torch.tensor(again, dtype=torch.bool)
 
     def finished(self, outcome: TrialOutcome) -> None:
-        for world, leg, ok in zip(outcome.world.tolist(), outcome.pair.tolist(), outcome.success.tolist(),
-                                  strict=True):
+        touch = torch.where(outcome.touched, outcome.longest_touch_s, -1.0).tolist()
+        for world, leg, ok, longest in zip(outcome.world.tolist(), outcome.pair.tolist(), outcome.success.tolist(),
+                                           touch, strict=True):
+            longest = max(longest, self._touches.pop(world, -1.0))
             if ok and self._next[leg] >= 0:
                 self._going_on[world] = self._next[leg]
+                self._touches[world] = longest
             else:
-                self._count(leg, ok)
+                self._count(leg, ok, longest)
         self.report(self.ended)
 
     def chain(self, worlds: torch.Tensor, gaits: torch.Tensor) -> torch.Tensor:
         return torch.tensor([self._going_on.pop(w, -1) for w in worlds.tolist()], dtype=torch.long)
 
-    def _count(self, leg: int, success: bool) -> None:
+    def _count(self, leg: int, success: bool, longest_touch_s: float) -> None:
+        """Count a transition of ``leg``'s pair; ``longest_touch_s`` < 0: it touched nothing."""
         cell = self._counts(leg)
         cell.samples += 1
         cell.successes += int(success)
+        cell.touched += int(longest_touch_s >= 0)
+        cell.longest_touch_s = max(cell.longest_touch_s, longest_touch_s)
         self.ended += 1

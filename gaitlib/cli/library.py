@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
+from gaitlib.defaults import DEFAULT_FALLS
 
 __all__ = ["library_command"]
 
@@ -34,15 +35,17 @@ def library_command(
         return
     console = table_console()
     gaits = Table(title=f"{lib.root}{' (shipped with gaitlib)' if status.shipped else ''}: gaits")
-    for column in ("gait", "speed m/s", "cycle s", "preset", "iterations", "train min", "eval falls", "eval m/s",
-                   "identity"):
+    for column in ("gait", "speed m/s", "cycle s", "preset", "iterations", "train min", "eval falls", "eval touches",
+                   "eval m/s", "identity"):
         gaits.add_column(column, justify="left" if column in ("gait", "preset", "identity") else "right")
     for g in status.gaits:
         s = g.summary
         gaits.add_row(
             g.name, _num(s["speed_m_s"], 2), _num(s["cycle_s"], 3), str(s["preset"] or "-"),
             str(s["iterations"] or "-"), _num(s["train_minutes"], 1),
-            "-" if s["eval_fall_rate"] is None else f"{100 * s['eval_fall_rate']:.1f}% of {s['eval_episodes']}",
+            "-" if s["eval_fall_rate"] is None
+            else f"{100 * s['eval_fall_rate']:.1f}% of {s['eval_episodes']} ({s['eval_falls']})",
+            "-" if s["eval_touch_rate"] is None else f"{100 * s['eval_touch_rate']:.1f}%",
             _num(s["eval_speed_m_s"], 2), "unusable" if g.identity is None else g.identity[:12],
         )
     console.print(gaits)
@@ -64,6 +67,12 @@ def library_command(
                       f"{detours or 'every pair best directly'}", soft_wrap=True)
     elif routes is not None:
         console.print(f"problem: {escape(routes['why'])}", soft_wrap=True)
+    other = status.other_falls()
+    if routes is not None and routes.get("falls", DEFAULT_FALLS) != DEFAULT_FALLS:
+        other["switching/routes.json"] = routes["falls"]
+    if other:
+        console.print(f"counted with another definition of a fall than the default ({DEFAULT_FALLS}): "
+                      + ", ".join(f"{name} ({falls})" for name, falls in other.items()), soft_wrap=True)
     if not status.problems:
         console.print("nothing stale: every gait is usable and every pair is covered")
     for problem in status.problems:
@@ -85,7 +94,8 @@ def _routes(lib, status) -> dict | None:
     except GaitlibError as stale:
         return {"state": "stale", "why": str(stale)}
     detours = {pair: list(path) for pair, path in table.detours().items()}
-    return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours}
+    return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours,
+            "falls": table.measured_with.get("falls", "contact")}
 
 
 def _num(value: float | None, digits: int) -> str:

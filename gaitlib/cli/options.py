@@ -16,6 +16,7 @@ from pathlib import Path
 
 import typer
 
+from gaitlib.defaults import DEFAULT_FALLS, FALL_DEFINITIONS
 from gaitlib.errors import GaitlibError
 
 __all__ = [
@@ -135,19 +136,18 @@ def bounded(default, *names: str, help: str, bounds: Bounds):
 
 
 def falls_option():
-    """``--falls contact|trunk``: what ends an episode or a transition as a fall; another value is refused in one
-    line at parse time."""
-
+    """``--falls trunk|contact``: what ends an episode or a transition as a fall (default ``trunk``, the field's);
+    another value is refused in one line at parse time."""
     def check(param: typer.CallbackParam, value: str) -> str:
-        if value not in ("contact", "trunk"):
-            raise OptionError(f"--falls takes contact or trunk, got '{value}'")
+        if value not in FALL_DEFINITIONS:
+            raise OptionError(f"--falls takes {' or '.join(FALL_DEFINITIONS)}, got '{value}'")
         return value
 
     return typer.Option(
-        "contact", "--falls", callback=check,
-        help="What is a fall: contact (a non-foot body on the ground, or the trunk too low or tilted: gaitlib's "
-        "training and quality bar) or trunk (only the trunk too low or tilted, a leg's touch ridden through: "
-        "legged_gym's A1).",
+        DEFAULT_FALLS, "--falls", callback=check,
+        help="What is a fall: trunk (the default, the field's: the trunk too low, tilted past 90 degrees or on the "
+        "ground, as legged_gym's and Isaac Lab's A1 tasks count one; a leg's touch ridden through is reported beside "
+        "as a touch) or contact (gaitlib's strict definition: any non-foot body on the ground is a fall too).",
     )
 
 

@@ -63,6 +63,7 @@ def run_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     routed: bool = typer.Option(False, "--routed", help="Make each switch through another gait where the library's "
                                 "route table (gaitlib routes) measured that better."),
+    falls: str = falls_option(),
 ) -> None:
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
     with --strategy."""
@@ -94,6 +95,7 @@ def run_command(
         action_delay=action_delay,
         backend=backend,
         seed=seed,
+        falls=falls,
     )
     plot_trace(trace, plot)
     if video is not None:
@@ -120,8 +122,11 @@ def run_command(
         "strategy": strategy,
         "requests_s": trace.requests_s,
         "switches": switches,
+        "falls": trace.falls,
         "stayed_up": trace.stayed_up,
         "fell_s": trace.fell_s,
+        "touches": trace.touches,
+        "longest_touch_s": trace.longest_touch_s,
         "plot": str(plot),
         "video": None if video is None else str(video),
     }
@@ -140,8 +145,10 @@ def run_command(
     if sequence != asked:
         print(f"routed: {' -> '.join((source, *asked))} through {' -> '.join((source, *sequence))}")
     outcome = "stayed up" if trace.stayed_up else f"FELL at {trace.fell_s:.2f} s"
+    touches = (f"{trace.touches} leg touch(es) ridden through, the longest {trace.longest_touch_s:.2f} s"
+               if trace.touches else "no leg touched the ground")
     print(f"{' -> '.join((source, *sequence))} with {strategy}: {len(switches)} of {len(sequence)} switch(es) made; "
-          f"the robot {outcome}")
+          f"the robot {outcome} (falls counted the {trace.falls} way); {touches}")
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
 
 
@@ -238,9 +245,11 @@ def benchmark_command(
     write_matrix(out / "matrix.png", rows, title=title)
     facts = summary(rows)
     if as_json:
-        print(json_text({"success": success_table(rows), "summary": facts, "out": str(out)}))
+        touches = success_table(rows, field="touch_rate")
+        print(json_text({"falls": falls, "success": success_table(rows), "touches": touches, "summary": facts,
+                         "out": str(out)}))
         return
-    _print_summary(facts, out, plot)
+    _print_summary(facts, out, plot, falls)
 
 
 def routes_command(
@@ -327,22 +336,24 @@ def _gap_title(gap) -> str:
     return "".join(f"; {part}" for part in parts)
 
 
-def _print_summary(facts: dict, out: Path, plot: Path) -> None:
+def _print_summary(facts: dict, out: Path, plot: Path, falls: str) -> None:
     from rich.table import Table
 
     from gaitlib.cli.tables import table_console
 
-    means = facts["mean_success"]
+    means, touches = facts["mean_success"], facts["mean_touch"]
     strategies = facts["ranking"]
     pairs = list(dict.fromkeys(p for per in means.values() for p in per))
-    table = Table(title="mean success over push magnitudes")
+    table = Table(title=f"mean success over push magnitudes (falls: {falls} definition), and in brackets the share "
+                        "of transitions in which a leg touched the ground")
     table.add_column("pair")
     for strategy in strategies:
         table.add_column(strategy, justify="right")
     for pair in pairs:
-        table.add_row(pair, *(f"{means[s][pair]:.3f}" if pair in means[s] else "-" for s in strategies))
+        table.add_row(pair, *(f"{means[s][pair]:.3f} ({touches[s][pair]:.3f})" if pair in means[s] else "-"
+                              for s in strategies))
     table.add_section()
-    table.add_row("all", *(f"{facts['overall'][s]:.3f}" for s in strategies))
+    table.add_row("all", *(f"{facts['overall'][s]:.3f} ({facts['overall_touch'][s]:.3f})" for s in strategies))
     console = table_console()
     console.print(table)
     for strategy, per_pair in facts["margins"].items():

@@ -149,7 +149,8 @@ def train_command(
     e = result.evaluation
     console.print(
         f"wrote {result.entry} after {result.iterations} iterations, {result.samples:,} samples, "
-        f"{result.wall_clock_s / 60:.1f} min; eval over {e.episodes} episodes: fall rate {e.fall_rate:.3f}, "
+        f"{result.wall_clock_s / 60:.1f} min; eval over {e.episodes} episodes: falls {e.fall_rate:.3f} ({e.falls}), "
+        f"touches {e.touch_rate:.3f}, "
         f"joint RMSE {e.joint_rmse:.3f} rad, speed {e.forward_speed:.2f} m/s (reference {e.reference_speed:.2f})",
         soft_wrap=True,
     )
@@ -159,14 +160,14 @@ def train_command(
 
 
 def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int, plot: Path | None,
-                as_json: bool) -> None:
+                as_json: bool, falls: str) -> None:
     """``gaitlib eval GAIT --impulses ...``: the single-push curve as a table (or JSON) and a plot."""
     from gaitlib.benchmark.push_curve import SECTORS, single_push_curve, write_push_plot
     from gaitlib.envs import EnvConfig
 
     points = single_push_curve(
         entry.policy, entry.clip, env_cfg=lib.shared_policy_settings([entry.name]).env_config(EnvConfig()),
-        impulses=impulses, episodes=episodes, backend=backend, seed=seed,
+        impulses=impulses, episodes=episodes, backend=backend, seed=seed, falls=falls,
     )
     if plot is not None:
         write_push_plot({entry.name: points}, plot)
@@ -177,15 +178,21 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
 
     from gaitlib.cli.tables import table_console
 
-    table = Table(title=f"{entry.name}: falls under one push of 0.1 s per episode ({episodes} episodes each, 95% "
-                        "interval), and per direction")
-    for column in ("impulse N s", "force N", "falls", *SECTORS):
+    table = Table(title=f"{entry.name}: falls ({falls} definition) under one push of 0.1 s per episode ({episodes} "
+                        "episodes each, 95% interval), per direction, and the episodes with a leg's touch")
+    for column in ("impulse N s", "force N", "falls", *SECTORS, "touches", "longest touch s"):
         table.add_column(column, justify="right")
     for p in points:
         rate = f"{100 * p.fall_rate:.1f}% [{100 * p.ci95[0]:.1f}, {100 * p.ci95[1]:.1f}]"
         sectors = (f"{f}/{k}" for f, k in p.by_sector.values())
-        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate, *sectors)
+        touches = f"{100 * p.touches / p.episodes:.1f}% [{100 * p.touch_ci95[0]:.1f}, {100 * p.touch_ci95[1]:.1f}]"
+        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate, *sectors, touches, f"{p.longest_touch_s:.2f}")
     table_console().print(table)
+
+
+def _rate(rate: float, ci95: tuple[float, float]) -> str:
+    """A rate in percent with its 95% interval."""
+    return f"{100 * rate:.2f}% [{100 * ci95[0]:.2f}, {100 * ci95[1]:.2f}]"
 
 
 def _say_status(console, library: Path, gait: str) -> None:
@@ -220,9 +227,13 @@ def eval_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
     falls: str = falls_option(),
+    record: bool = typer.Option(
+        False, "--record", help="Store this evaluation as the entry's own (its metadata.json; the weights untouched)."
+    ),
+    replace: bool = typer.Option(False, "--replace", help="With --record: into the shipped library (refused without)."),
 ) -> None:
-    """Evaluate a library policy under paper Table 1 randomization: falls, heading held, tracking errors; or, with
-    --impulses, its fall rate against a single push's impulse."""
+    """Evaluate a library policy under paper Table 1 randomization: falls, leg touches, heading held, tracking
+    errors; or, with --impulses, its fall rate against a single push's impulse."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
     from gaitlib.envs import EnvConfig
     from gaitlib.library import Library
@@ -233,8 +244,18 @@ def eval_command(
                                                         example="0:30:3")
     lib = Library(library)
     entry = lib.entry(gait)
+    if record:
+        from gaitlib.cli.options import OptionError
+        from gaitlib.library.layout import is_shipped
+
+        if values is not None:
+            raise OptionError("--record stores the quality-bar evaluation; it does not take --impulses")
+        if is_shipped(lib.root) and not replace:
+            raise OptionError(f"--record would rewrite the shipped library's {gait}; give --replace, or --library "
+                              "your own")
     if values is not None:
-        _push_curve(entry, lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot, as_json=as_json)
+        _push_curve(entry, lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot, as_json=as_json,
+                    falls=falls)
         return
     result = evaluate_policy(
         entry.policy,
@@ -245,9 +266,14 @@ def eval_command(
         backend=backend,
         push_max=push_max,
         action_delay_steps=action_delay,
-        body_contact_falls=falls == "contact",
+        falls=falls,
         seed=seed,
     )
+    if record:
+        command = (f"gaitlib eval {gait} --episodes {episodes} --seconds {seconds:g} --push-max {push_max:g} --seed "
+                   f"{seed} --backend {backend} --falls {falls}"
+                   + ("" if action_delay is None else f" --action-delay {action_delay}"))
+        lib.record_evaluation(gait, result.as_dict() | {"seed": seed, "command": command})
     if as_json:
         print(json_text({"gait": gait} | result.as_dict()))
         return
@@ -255,7 +281,9 @@ def eval_command(
         f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push_max:g} N, action "
         + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)"),
         [
-            ("fall rate", f"{result.fall_rate:.3f}"),
+            (f"falls ({result.falls} definition)", _rate(result.fall_rate, result.fall_ci95)),
+            ("leg touches (episodes with a non-foot body on the ground)", _rate(result.touch_rate, result.touch_ci95)),
+            ("longest touch (s)", f"{result.longest_touch_s:.3f}"),
             ("falls by cause (one may meet several)",
              ", ".join(f"{name.replace('_', ' ')} {n}" for name, n in result.falls_by_cause.items()) or "-"),
             ("heading lost (> 90 deg)", f"{result.heading_loss_rate:.3f}"),

@@ -17,6 +17,7 @@ from gaitlib.cli.options import (
     WORLDS,
     Bounds,
     bounded,
+    falls_option,
     ray_address_argument,
     ray_option,
     workers_option,
@@ -170,9 +171,10 @@ def fit_command(
     evaluate: bool = typer.Option(False, "--evaluate", help="Score the library's net on --data instead of fitting."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    falls: str = falls_option(),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
-    thresholds, and write both to the library."""
+    thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
     from gaitlib.library import Library
     from gaitlib.strategies.fitting import evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS
@@ -184,7 +186,7 @@ def fit_command(
         _report(evaluate_library(lib, samples, sources=data), as_json)
         return
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
-    report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed)
+    report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls)
     _report(report.as_dict(), as_json)
     if not as_json:
         if report.note:
@@ -221,6 +223,7 @@ def map_command(
     data: Path = typer.Argument(..., help="A transition file (gaitlib collect --out)."),
     out: Path | None = typer.Option(None, "--out", help="Folder for map.png and map.json (default: DATA-map/)."),
     bins: int = bounded(10, "--bins", help="Phase bins per cycle;", bounds=Bounds(low=2, high=100, whole=True)),
+    falls: str = falls_option(),
 ) -> None:
     """Map where switches fail: per ordered pair, success over source x destination phase, per tenth of either
     cycle and by the feet on the ground, with counts and 95% intervals, and when switch-caused falls happen."""
@@ -230,9 +233,9 @@ def map_command(
 
     samples = read(data)
     out = out if out is not None else data.with_name(data.stem + "-map")
-    maps = transition_maps(samples, bins=bins)
+    maps = transition_maps(samples, bins=bins, falls=falls)
     out.mkdir(parents=True, exist_ok=True)
-    write_map_json(maps, out / "map.json", source=str(data))
+    write_map_json(maps, out / "map.json", source=str(data), falls=falls)
     write_map_plot(maps, out / "map.png", title=f"{data.name}: switch success")
 
     from rich.table import Table
@@ -240,13 +243,15 @@ def map_command(
     def rate(r) -> str:
         return f"{100 * r.rate:.0f}% [{100 * r.ci95[0]:.0f}, {100 * r.ci95[1]:.0f}] of {r.samples}"
 
-    table = Table(title=f"{data}: success of a switch (95% interval, samples); bins of 1/{bins} cycle")
-    for column in ("pair", "random switch", "best source bin", "worst source bin", "best dest bin", "worst dest bin"):
+    table = Table(title=f"{data}: success of a switch (falls: {falls} definition; 95% interval, samples); bins of "
+                        f"1/{bins} cycle; leg touches beside")
+    for column in ("pair", "random switch", "best source bin", "worst source bin", "best dest bin", "worst dest bin",
+                   "touches"):
         table.add_column(column, justify="left" if column == "pair" else "right")
     for m in maps:
         best, worst = m.best_worst_source_bins()
         dest = sorted(m.by_dest_phase, key=lambda r: r.rate)
-        table.add_row(m.pair, rate(m.overall), rate(best), rate(worst), rate(dest[-1]), rate(dest[0]))
+        table.add_row(m.pair, rate(m.overall), rate(best), rate(worst), rate(dest[-1]), rate(dest[0]), rate(m.touches))
     table_console().print(table)
     q99 = fall_time_quantile(maps)
     print_measures(

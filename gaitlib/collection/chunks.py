@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.library.policy import per_gait
 from gaitlib.meta import MetaController, SwitchDetail, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
@@ -92,7 +93,11 @@ class ChunkWorker:
         self._pairs = [(gaits.index(m), gaits.index(n)) for m, n in header.settings["pairs"]]
         self._clips = [e.clip for e in entries]
         pushes = protocol.pushes(push_max, fixed=False)
-        self._env_cfg = shared.env_config(EnvConfig(episode_seconds=EPISODE_SECONDS, pushes=pushes))
+        # Falls by the trunk definition end a trial; a touch is recorded beside, which gives the contact outcome too.
+        termination = TerminationConfig().counting("trunk")
+        self._env_cfg = shared.env_config(
+            EnvConfig(episode_seconds=EPISODE_SECONDS, pushes=pushes, termination=termination)
+        )
         self._sim = make_backend(header.settings["backend"], num_worlds=num_worlds, device=device)
         self._policies = [e.policy.to(self._sim.device) for e in entries]
         self._report = report
@@ -251,5 +256,7 @@ class ChunkSamples(TrialSchedule):
                 world=ids.cpu().numpy(),
                 chunk=np.zeros(len(ids)),
                 fall_after=outcome.fall_after_s[rows].cpu().numpy(),
+                success_contact=(outcome.success[rows] & ~outcome.touched[rows]).cpu().numpy(),
+                longest_touch=outcome.longest_touch_s[rows].cpu().numpy(),
             )
         )

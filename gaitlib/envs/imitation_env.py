@@ -144,7 +144,8 @@ class ImitationEnv(VecEnv):
         observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
         ref = observed[0]
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
-        causes = fall_causes(state.body_contact, state.root_pos[:, 2], state.root_quat, ref.root_quat, cfg.termination)
+        causes = fall_causes(state.body_contact, state.trunk_contact, state.root_pos[:, 2], state.root_quat,
+                             ref.root_quat, cfg.termination)
         terminated = diverged | any_cause(causes)
         time_out = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_out
@@ -152,6 +153,7 @@ class ImitationEnv(VecEnv):
         extras = {
             "time_outs": time_out,
             "fall_causes": causes | {"diverged": diverged},
+            "touch": state.body_contact,  # a non-foot body on the ground this step, whatever ends the episode
             "log": {f"/reward/{name}": value.mean() for name, value in self._terms.items()}
             | {"/termination/rate": terminated.float().mean(), "/termination/diverged": diverged.float().mean()},
         }

@@ -1,16 +1,34 @@
-"""Early termination (docs/training.md) as small pure functions over N worlds; each returns (N,) bool."""
+"""Early termination (docs/training.md) as small pure functions over N worlds; each returns (N,) bool.
+
+What a fall is has two definitions (:data:`gaitlib.defaults.FALL_DEFINITIONS`). ``trunk``, the default wherever
+gaitlib reports a fall: the trunk too low, tilted past the limit, or the trunk itself on the ground, as legged_gym's
+A1 (``terminate_after_contacts_on = ["base"]``, github.com/leggedrobotics/legged_gym, ``envs/a1/a1_config.py``) and
+Isaac Lab's velocity task (``base_contact``) count one; a leg's touch that the robot rides through is not a fall,
+and is reported beside every fall figure as a *touch*. ``contact``, gaitlib's stricter definition (and its
+training's termination): any non-foot body on the ground is a fall too.
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
+from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.errors import GaitlibError
 from gaitlib.rotations import quat_angle_between, quat_rotate
 
-__all__ = ["TerminationConfig", "any_cause", "fall_causes", "fallen", "orientation_lost", "too_low"]
+__all__ = [
+    "TerminationConfig",
+    "any_cause",
+    "fall_causes",
+    "fallen",
+    "orientation_lost",
+    "too_low",
+]
+
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -25,10 +43,22 @@ class TerminationConfig:
     """The rotation compared includes the heading (training: a policy that turns away fails); ``False``: only the
     tilt, the angle between the trunk's up axis and the reference trunk's (a fall, as evaluation counts it)."""
     body_contact: bool = True
-    """A non-foot body on the ground ends the episode (gaitlib's training, its quality bar and its benchmark);
-    ``False``: only the trunk's height and orientation do, as legged_gym's A1 ends an episode
-    only when its base touches the ground and penalizes its legs' contacts (``terminate_after_contacts_on =
-    ["base"]``, github.com/leggedrobotics/legged_gym, ``envs/a1/a1_config.py``)."""
+    """A non-foot body on the ground ends the episode (gaitlib's training, and the ``contact`` definition of a
+    fall); ``False``: only the trunk's height, its orientation and its own contact with the ground do (the
+    ``trunk`` definition), as legged_gym's A1 ends an episode only when its base touches the ground and penalizes
+    its legs' contacts."""
+
+    def counting(self, falls: str, **fields) -> TerminationConfig:
+        """These terminations (``fields`` replaced) counting falls by the definition ``falls`` (``trunk`` or
+        ``contact``)."""
+        if falls not in FALL_DEFINITIONS:
+            raise GaitlibError(f"falls '{falls}': {' or '.join(FALL_DEFINITIONS)}")
+        return replace(self, body_contact=falls == "contact", **fields)
+
+    @property
+    def falls(self) -> str:
+        """The definition of a fall these terminations count (``trunk`` or ``contact``)."""
+        return "contact" if self.body_contact else "trunk"
 
 
 def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:
@@ -51,15 +81,18 @@ def orientation_lost(
 
 def fall_causes(
     body_contact: torch.Tensor,
+    trunk_contact: torch.Tensor,
     root_height: torch.Tensor,
     root_quat: torch.Tensor,
     ref_root_quat: torch.Tensor,
     cfg: TerminationConfig,
 ) -> dict[str, torch.Tensor]:
     """Each termination in force apart, (N,) bool: ``body_contact`` (a non-foot body touches the ground; never,
-    unless ``cfg.body_contact``), ``too_low`` (the trunk), ``orientation_lost``; a fall may meet several."""
+    unless ``cfg.body_contact``), ``trunk_contact`` (the trunk itself on the ground), ``too_low`` (the trunk),
+    ``orientation_lost``; a fall may meet several."""
     return {
         "body_contact": body_contact if cfg.body_contact else torch.zeros_like(body_contact),
+        "trunk_contact": trunk_contact,
         "too_low": too_low(root_height, min_height=cfg.min_height),
         "orientation_lost": orientation_lost(
             root_quat, ref_root_quat, max_error=cfg.max_orientation_error, heading=cfg.heading
@@ -74,10 +107,12 @@ def any_cause(causes: Mapping[str, torch.Tensor]) -> torch.Tensor:
 
 def fallen(
     body_contact: torch.Tensor,
+    trunk_contact: torch.Tensor,
     root_height: torch.Tensor,
     root_quat: torch.Tensor,
     ref_root_quat: torch.Tensor,
     cfg: TerminationConfig,
 ) -> torch.Tensor:
-    """Any termination: a non-foot body touches the ground, the trunk is too low, or orientation is lost."""
-    return any_cause(fall_causes(body_contact, root_height, root_quat, ref_root_quat, cfg))
+    """Any termination: a non-foot body touches the ground (with ``cfg.body_contact``), the trunk touches it, the
+    trunk is too low, or orientation is lost."""
+    return any_cause(fall_causes(body_contact, trunk_contact, root_height, root_quat, ref_root_quat, cfg))

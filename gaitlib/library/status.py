@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.errors import GaitlibError
 from gaitlib.library.layout import first_fit, is_shipped, ordered_pairs
 from gaitlib.library.store import Library
@@ -54,6 +55,8 @@ class GaitStatus:
             "switch_start": t.get("switch_start"),
             "eval_episodes": e.get("episodes"),
             "eval_fall_rate": e.get("fall_rate"),
+            "eval_touch_rate": e.get("touch_rate"),
+            "eval_falls": e.get("falls", "contact") if e else None,
             "eval_speed_m_s": e.get("forward_speed"),
         }
 
@@ -73,6 +76,9 @@ class Bundle:
     """One record per transition file fitted on: ``path`` and its collection ``settings``."""
     inputs: tuple[str, ...]
     """Input kinds fitted (the first is the net written; several: ``--ablation``)."""
+    falls: dict[str, str]
+    """File name -> the definition of a fall its labels followed (files from before it was recorded: ``contact``,
+    the only one there was)."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +113,18 @@ class LibraryStatus:
         """The pairs of ``gaits`` that the switching models do not drive (stale or uncovered)."""
         return [p for p in ordered_pairs(gaits) if self.pairs.get(p) != "covered"]
 
+    def falls(self) -> dict[str, str]:
+        """Each artefact that depends on what a fall is (``GAIT/metadata.json``'s evaluation, the switching files)
+        -> the definition it used."""
+        used = {f"{g.name}/metadata.json": g.summary["eval_falls"] for g in self.gaits if g.summary["eval_falls"]}
+        if self.bundle is not None:
+            used |= {f"{Library.SWITCHING}/{name}": falls for name, falls in self.bundle.falls.items()}
+        return used
+
+    def other_falls(self) -> dict[str, str]:
+        """The artefacts of :meth:`falls` that used another definition than the default (``trunk``)."""
+        return {name: falls for name, falls in self.falls().items() if falls != DEFAULT_FALLS}
+
     def as_dict(self) -> dict:
         return {
             "library": str(self.root),
@@ -122,6 +140,8 @@ class LibraryStatus:
                 },
             },
             "problems": [{"text": p.text, "commands": list(p.commands)} for p in self.problems],
+            "falls": self.falls(),
+            "other_falls": self.other_falls(),
         }
 
 
@@ -207,6 +227,12 @@ def read_bundle(library: Library) -> Bundle:
             accuracy=dict(accuracy["balanced_validation_accuracy"][written]),
             data=tuple({"path": str(f["path"]), "settings": dict(f["settings"])} for f in files),
             inputs=tuple(accuracy["balanced_validation_accuracy"]),
+            falls={
+                Library.NET: str(net["fit"].get("falls", "contact")),
+                Library.TMT: str(tmt["info"].get("falls", "contact")),
+                Library.CALIBRATION: str(records[Library.CALIBRATION]["info"].get("falls", "contact")),
+                Library.ACCURACY: str(accuracy.get("falls", "contact")),
+            },
         )
     except (KeyError, TypeError, ValueError, IndexError) as error:
         raise GaitlibError(f"the switching models in {folder} are damaged ({type(error).__name__}: {error})") from None

@@ -29,6 +29,7 @@ import contextlib
 import dataclasses
 import json
 import math
+import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -278,6 +279,21 @@ class Library:
             }
             write_json(staging / "metadata.json", metadata, checksum=True)
         return self.root / description.name
+
+
+    def record_evaluation(self, name: str, evaluation: dict) -> Path:
+        """Make ``evaluation`` the stored evaluation of entry ``name`` (its ``metadata.json``; the weights and
+        everything else untouched), published like a new entry: a reader sees the old or the new folder whole."""
+        entry = self.entry(name)  # a missing or damaged entry: one line, before anything is written
+        metadata = {k: v for k, v in entry.metadata.items() if k != CHECKSUM_KEY} | {"evaluation": evaluation}
+        self._entries.pop(name, None)
+        folder = self.root / name
+        with staged_folder(folder) as staging:
+            for item in folder.iterdir():
+                if item.is_file() and item.name != "metadata.json":
+                    shutil.copy2(item, staging / item.name)
+            write_json(staging / "metadata.json", metadata, checksum=True)
+        return folder
 
 
 def _load_entry(library: Path, name: str) -> LibraryEntry:

@@ -82,6 +82,9 @@ class MetaStep:
     """(N,) the strategy's best candidate score of waiting worlds this step (NaN elsewhere)."""
     best_phase: torch.Tensor
     """(N,) the best candidate destination phase of waiting worlds this step (NaN elsewhere)."""
+    touch: torch.Tensor
+    """(N,) bool: a non-foot body (a leg's, or the trunk) was on the ground at the end of this step, before any
+    reset: a fall by the ``contact`` definition, a touch ridden through by the ``trunk`` one."""
 
 
 class MetaController:
@@ -179,7 +182,7 @@ class MetaController:
         self.queued[dones] = -1
         self.waited[self.queued >= 0] += 1
         self.steps += 1
-        return MetaStep(actions, fell, events, waiting, best_score, best_phase)
+        return MetaStep(actions, fell, events, waiting, best_score, best_phase, extras["touch"].to(fell.device))
 
     def _decide(self, ids: torch.Tensor):
         env = self.env

@@ -10,9 +10,10 @@ from itertools import pairwise
 import numpy as np
 import torch
 
-from gaitlib.defaults import DEFAULT_STRATEGY
+from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
+from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta.controller import DEADLINE_S, MetaStep, SwitchEvent
 from gaitlib.meta.setup import SwitchingSetup
@@ -37,6 +38,8 @@ class RunTrace:
     """Control period, s."""
     push_n: float
     """Push magnitude, N (0: none): pushes hit from ``DISTURBANCE_LEAD_S`` before each request until the deadline."""
+    falls: str = DEFAULT_FALLS
+    """What a fall was (:data:`gaitlib.defaults.FALL_DEFINITIONS`)."""
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) time at the end of each step, s."""
     active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -51,6 +54,9 @@ class RunTrace:
     """(T,) magnitude of the push on the trunk during each step, N."""
     foot_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
     """(T, feet) foot contacts, in the robot's foot order (the A1's FR, FL, RR, RL)."""
+    touch: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    """(T,) a non-foot body (a leg's, or the trunk) on the ground at the end of the step: a touch the robot rode
+    through (with the ``trunk`` definition of a fall)."""
     qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     """(T, 7 + joints) generalized positions (trunk position, quaternion w-x-y-z, joints) for rendering."""
     requests_s: list[float] = field(default_factory=list)
@@ -63,6 +69,20 @@ class RunTrace:
     @property
     def stayed_up(self) -> bool:
         return self.fell_s is None
+
+    @property
+    def touches(self) -> int:
+        """Unbroken touches of a non-foot body on the ground the robot rode through."""
+        return int(np.count_nonzero(np.diff(self.touch.astype(np.int8), prepend=0) == 1))
+
+    @property
+    def longest_touch_s(self) -> float:
+        """The longest of them, s (0: none)."""
+        longest = run = 0
+        for touching in self.touch.tolist():
+            run = run + 1 if touching else 0
+            longest = max(longest, run)
+        return longest * self.dt
 
     @property
     def switches_s(self) -> list[float]:
@@ -83,13 +103,15 @@ def run_episode(
     action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
+    falls: str = DEFAULT_FALLS,
 ) -> RunTrace:
     """Switch trials of :mod:`gaitlib.meta.trials`, chained on one robot: run ``source``, request ``dests[0]`` at
     ``request_s``, let ``strategy`` switch; ``hold_s`` after the end of that switch's control step request the next
     gait of ``dests``, and so on; the run ends ``hold_s`` after the last switch, or at a fall. Pushes of ``push_n``
     (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit the robot from ``DISTURBANCE_LEAD_S`` before
     each request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits
-    exactly this many control steps (``None``: the policies' trained random delay)."""
+    exactly this many control steps (``None``: the policies' trained random delay). ``falls``: what ends the run as
+    a fall (:data:`gaitlib.defaults.FALL_DEFINITIONS`); touches are recorded either way."""
     dests = (dests,) if isinstance(dests, str) else tuple(dests)
     gaits = [setup.gait_index(g) for g in (source, *dests)]  # unknown names: one line each
     if not dests:
@@ -113,9 +135,8 @@ def run_episode(
     try:
         pushes = protocol.pushes(push_n, fixed=True)
         seconds = request_s + len(pairs) * (deadline_s + hold_s) + 1.0
-        env = setup.make_env(
-            sim, EnvConfig(episode_seconds=seconds, pushes=pushes), seed=seed, action_delay=action_delay
-        )
+        cfg = EnvConfig(episode_seconds=seconds, pushes=pushes, termination=TerminationConfig().counting(falls))
+        env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
         threshold = None if strategy == "random" else ctl.strategy.threshold
         trace = RunTrace(
@@ -126,6 +147,7 @@ def run_episode(
             thresholds=tuple(_pair_threshold(threshold, pair) for pair in pairs),
             dt=env.dt,
             push_n=push_n,
+            falls=falls,
         )
         rows: dict[str, list] = {name: [] for name in _ROWS}
         trials = SwitchTrials(ctl, protocol, _Sequence(pairs), seed=seed)
@@ -183,7 +205,7 @@ def _pair_threshold(threshold: float | dict | None, pair: tuple[int, int]) -> fl
     return threshold.get(pair) if isinstance(threshold, dict) else threshold
 
 
-_ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "qpos")
+_ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "touch", "qpos")
 """The per-step fields of :class:`RunTrace`."""
 
 
@@ -197,6 +219,7 @@ def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_
     rows["root_height"].append(float(s.root_pos[0, 2]))
     rows["push"].append(float(env.push_force[0].norm()))
     rows["foot_contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
+    rows["touch"].append(bool(result.touch[0]))
     rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
 
 
@@ -205,5 +228,6 @@ def _fill(trace: RunTrace, rows: dict[str, list], *, legs: int, qpos_size: int) 
     for name, values in rows.items():
         setattr(trace, name, np.asarray(values))
     trace.active = trace.active.astype(np.int64)
+    trace.touch = trace.touch.astype(bool)
     trace.foot_contact = trace.foot_contact.astype(bool).reshape(-1, legs)
     trace.qpos = trace.qpos.reshape(-1, qpos_size)

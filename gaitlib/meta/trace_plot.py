@@ -46,6 +46,10 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     if trace.push.any():
         pushed = {"where": trace.push > 0, "step": "pre", "color": "tab:red", "alpha": 0.2}
         ax_height.fill_between(t, 0, 1, transform=ax_height.get_xaxis_transform(), label="push", **pushed)
+    if trace.touch.any():
+        touched = {"where": trace.touch, "step": "pre", "color": "tab:purple", "alpha": 0.3}
+        ax_height.fill_between(t, 0, 1, transform=ax_height.get_xaxis_transform(), label="leg touch", **touched)
+    if trace.push.any() or trace.touch.any():
         ax_height.legend(loc="upper left", fontsize=8)
     contact = trace.foot_contact.T.astype(float)
     if len(t):
@@ -68,9 +72,11 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
         if trace.fell_s is not None:
             ax.axvline(trace.fell_s, color="tab:purple", linewidth=1.5)
     outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s (purple)"
+    touches = f"{trace.touches} leg touch(es) ridden through" if trace.touches else "no leg touch"
     fig.suptitle(
         f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N:\n"
-        f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome}",
+        f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome} "
+        f"(falls: {trace.falls}), {touches}",
         fontsize=10,
     )
     fig.tight_layout()

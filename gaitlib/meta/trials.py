@@ -11,7 +11,10 @@ A trial, per world, all worlds at once (per-world state machines held as tensors
 3. the switch to n is requested; the controller's strategy switches when it says so (``random``: at once, at a
    uniform destination phase), or the request is forced after ``deadline_s``;
 4. the verdict: success if the robot does not fall from the request until ``horizon_s`` after the end of the
-   control step in which it switched.
+   control step in which it switched; beside it, whether a non-foot body touched the ground in that window
+   (a *touch*: with the ``trunk`` definition of a fall the robot may ride it through) and the longest such touch.
+   Run with the ``trunk`` definition, a trial also gives the ``contact`` verdict: no fall and no touch (the two
+   runs are the same motion up to the first touch, where the ``contact`` one would have ended).
 
 Pushes come in one of two windows. ``request`` (the benchmark and ``gaitlib run``): from ``push_lead_s`` before
 the request until ``deadline_s`` after it, whatever the strategy does (the last push runs out), so that every
@@ -109,6 +112,10 @@ class TrialOutcome:
     """(k,) time from the switch to the fall, s (inf for a success, 0 for a fall before the switch)."""
     max_push: torch.Tensor
     """(k,) largest push magnitude on the trunk from the reset (or the chained start) to the switch, N."""
+    touched: torch.Tensor
+    """(k,) bool: a non-foot body touched the ground from the request to the verdict."""
+    longest_touch_s: torch.Tensor
+    """(k,) the longest unbroken touch in that window, s (0: none)."""
 
 
 class TrialSchedule(ABC):
@@ -183,6 +190,8 @@ class SwitchTrials:
         self._deadline = round(protocol.deadline_s / env.dt)
         self._push_left = torch.zeros(n, dtype=torch.long, device=dev)  # control steps of pushes left per world
         self._max_push = torch.zeros(n, device=dev)
+        self._touch_run = torch.zeros(n, dtype=torch.long, device=dev)  # steps of the touch under way (judged)
+        self._touch_longest = torch.zeros(n, dtype=torch.long, device=dev)  # longest since the request
         self._begin(torch.arange(n, device=dev))
 
     @property
@@ -213,6 +222,10 @@ class SwitchTrials:
         push = self.env.push_force.norm(dim=1)
         self._max_push = torch.where(before, torch.maximum(self._max_push, push), self._max_push)
         fell, stage = result.fell, self._stage
+        judged = (stage == self.WAITING) | (stage == self.AFTER)
+        touch = result.touch & judged
+        self._touch_run = torch.where(touch, self._touch_run + 1, 0)
+        self._touch_longest = torch.where(judged, torch.maximum(self._touch_longest, self._touch_run), 0)
         source_fell = fell & (stage == self.SOURCE)
         failed = fell & ((stage == self.WAITING) | (stage == self.AFTER))
         succeeded = ~fell & (stage == self.AFTER) & (self._steps_left <= 0)
@@ -254,6 +267,8 @@ class SwitchTrials:
                 success=success,
                 fall_after_s=torch.where(success, torch.inf, after.float() * self.env.dt),
                 max_push=self._max_push[ids],
+                touched=self._touch_longest[ids] > 0,
+                longest_touch_s=self._touch_longest[ids].float() * self.env.dt,
             )
         )
 

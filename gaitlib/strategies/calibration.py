@@ -84,9 +84,11 @@ class Calibration:
         return torch.sigmoid(a * z + b)
 
 
-def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarray, identities: dict[str, str]):
+def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarray, identities: dict[str, str],
+              falls: str):
     """Fit the :class:`Calibration` of ``net`` on the rows of ``data`` outside ``train_rows`` (the rows it was
-    trained on), each (pair, label) class weighted by its count in ``data`` over its count among those rows."""
+    trained on), each (pair, label) class weighted by its count in ``data`` over its count among those rows; the
+    labels are ``data``'s ``success``, which ``falls`` names the definition of (recorded in the info)."""
     x = data.samples
     held = np.ones(len(x), dtype=bool)
     held[train_rows] = False
@@ -104,7 +106,8 @@ def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarra
         gaits = data.header.gaits
         info[f"{gaits[m]}-{gaits[n]}"] = {"held_out": int(rows.sum()), "successes": int(success[rows].sum())}
     rule = "Platt scaling per ordered pair on held-out rows, classes weighted back to their share of the data"
-    return Calibration(tuple(data.header.gaits), dict(identities), pairs, {"pairs": info, "rule": rule})
+    return Calibration(tuple(data.header.gaits), dict(identities), pairs, {"pairs": info, "rule": rule,
+                                                                           "falls": falls})
 
 
 def save_calibration(path: Path, calibration: Calibration) -> Path:

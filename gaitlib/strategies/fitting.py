@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.atomic import write_json
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.errors import UnknownNameError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
@@ -64,6 +65,8 @@ class FitReport:
     note: str | None = None
     """What reading the data left out or tolerated (samples of policies the library no longer holds), else
     ``None``."""
+    falls: str = DEFAULT_FALLS
+    """The definition of a fall the labels followed."""
 
     def accuracy(self) -> dict[str, dict[str, float]]:
         """Input kind -> ``"m-n"`` -> balanced validation accuracy (0-1)."""
@@ -79,6 +82,7 @@ class FitReport:
             "data": list(self.data),
             "samples": self.samples,
             "input_written": next(iter(self.results)),
+            "falls": self.falls,
             "balanced_samples": {
                 kind: sum(2 * (t + v) for t, v in result.split.per_class.values())
                 for kind, result in self.results.items()
@@ -99,13 +103,15 @@ def fit_library(
     inputs: Sequence[str] = ("latent",),
     epochs: int = 100,
     seed: int = 0,
+    falls: str = DEFAULT_FALLS,
     on_epoch: Callable[[str, EpochStats], None] | None = None,
 ) -> FitReport:
     """Fit ``library``'s transition-net (one per kind in ``inputs``; the first is written), TMT and accuracy report
     on ``data`` (read from ``sources``) and write them into the library.
 
     Refuses, before any work, an unknown input kind and data collected with other policies than the library's
-    (:class:`~gaitlib.errors.TransitionDataError`). ``on_epoch(kind, stats)`` reports progress.
+    (:class:`~gaitlib.errors.TransitionDataError`). ``falls``: the definition of a fall the labels follow (every
+    sample holds both outcomes), recorded in each file written. ``on_epoch(kind, stats)`` reports progress.
     """
     for kind in inputs:
         if kind not in INPUT_KINDS:
@@ -116,7 +122,7 @@ def fit_library(
     results = {}
     for kind in dict.fromkeys(inputs):
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
-        results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed), on_epoch=report)
+        results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed, falls=falls), on_epoch=report)
     written = next(iter(results.values()))
     names = data.header.gaits
     covered = {f"{names[m]}-{names[n]}" for m, n in data.samples.pairs()}
@@ -130,11 +136,14 @@ def fit_library(
         ),
         uncovered=tuple(pair for pair in ordered_pairs(library.gaits()) if pair not in covered),
         note=data.info.note,
+        falls=falls,
     )
-    calibration = calibrate(written.net, data, train_rows=written.split.train, identities=identities)
+    labelled = data.labelled(falls)
+    calibration = calibrate(written.net, labelled, train_rows=written.split.train, identities=identities, falls=falls)
     with library.publish_switching() as staging:  # the four replace the library's together, or none does
         save_net(staging / Library.NET, written)
-        save_table(staging / Library.TMT, build_table(data, identities=identities, source=", ".join(fitted.data)))
+        table = build_table(labelled, identities=identities, source=", ".join(fitted.data), falls=falls)
+        save_table(staging / Library.TMT, table)
         write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
         library.write_checksums(staging)

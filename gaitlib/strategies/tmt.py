@@ -106,10 +106,11 @@ def sample_scores(table: TransitionTable, data: TransitionData) -> dict[str, np.
 
 
 def build_table(
-    data: TransitionData, *, identities: dict[str, str], source: str, bins: int = PHASE_GRID
+    data: TransitionData, *, identities: dict[str, str], source: str, falls: str, bins: int = PHASE_GRID
 ) -> TransitionTable:
     """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds; ``source`` says
-    where the data came from (kept in the table's info)."""
+    where the data came from and ``falls`` the definition of a fall its ``success`` labels follow (both kept in
+    the table's info)."""
     x, gaits = data.samples, tuple(data.header.gaits)
     g = len(gaits)
     if len(x) == 0:
@@ -138,6 +139,7 @@ def build_table(
             table.thresholds[name][(m, n)] = best_threshold(scores[name][rows], x.success[rows])
     table.info = {
         "data": source,
+        "falls": falls,
         "samples": len(x),
         "bins": bins,
         "score": "alive rate (successes + 1) / (samples + 2) per cell",

@@ -6,12 +6,14 @@ from dataclasses import asdict, dataclass, replace
 
 import torch
 
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import make_backend
+from gaitlib.stats import wilson_interval
 
 __all__ = ["EvalResult", "evaluate_policy"]
 
@@ -25,8 +27,18 @@ class EvalResult:
     seconds: float
     """Episode length asked for, s."""
     fall_rate: float
-    """Fraction of episodes that ended in a fall before ``seconds``, 0-1: a non-foot body touched the ground, the
-    trunk sank too low, or it tilted more than 90 degrees (turning away is not a fall: see ``heading_loss_rate``)."""
+    """Fraction of episodes that ended in a fall before ``seconds``, 0-1, by the definition ``falls``: the trunk
+    sank too low, tilted more than 90 degrees or touched the ground (and with ``contact``, any non-foot body touched
+    it); turning away is not a fall (see ``heading_loss_rate``)."""
+    fall_ci95: tuple[float, float]
+    """Wilson 95% interval of ``fall_rate``."""
+    touch_rate: float
+    """Fraction of episodes in which a non-foot body (a leg's thigh or calf, or the trunk) touched the ground while
+    the robot was up, 0-1: the touches ridden through are counted here whether or not they were falls."""
+    touch_ci95: tuple[float, float]
+    """Wilson 95% interval of ``touch_rate``."""
+    longest_touch_s: float
+    """The longest unbroken touch of a non-foot body over all episodes, s (0: none)."""
     heading_loss_rate: float
     """Fraction of episodes in which the robot, still up, turned more than 90 degrees away from its starting
     heading at some moment, 0-1."""
@@ -50,13 +62,14 @@ class EvalResult:
     """Largest random push, N (0: no pushes)."""
     action_delay_steps: int | None
     """Control steps every action waited (``None``: the randomized delay of training)."""
-    body_contact_falls: bool
-    """Whether a non-foot body on the ground counted as a fall (else only the trunk too low or tilted did)."""
+    falls: str
+    """The definition of a fall counted (:data:`~gaitlib.envs.terminations.FALL_DEFINITIONS`): ``trunk`` (the
+    field's) or ``contact`` (a non-foot body on the ground is a fall too)."""
     falls_by_cause: dict[str, int]
-    """Falls that met each termination (``body_contact``: a non-foot body on the ground; ``too_low``: the trunk
-    below 0.12 m; ``orientation_lost``: tilted past 90 degrees; ``diverged``: the physics), a fall counted under
-    every one it met: a fall by ``body_contact`` alone ended with the trunk still above 0.12 m and tilted less than
-    90 degrees (a leg, or the trunk itself, touching down)."""
+    """Falls that met each termination (``body_contact``: a non-foot body on the ground, with ``contact`` only;
+    ``trunk_contact``: the trunk itself on the ground; ``too_low``: the trunk below 0.12 m; ``orientation_lost``:
+    tilted past 90 degrees; ``diverged``: the physics), a fall counted under every one it met: a fall by
+    ``body_contact`` alone ended with the trunk still above 0.12 m and tilted less than 90 degrees."""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -72,15 +85,15 @@ def evaluate_policy(
     backend: str = "auto",
     push_max: float = 0.0,
     action_delay_steps: int | None = None,
-    body_contact_falls: bool = True,
+    falls: str = DEFAULT_FALLS,
     seed: int = 0,
 ) -> EvalResult:
     """Run ``episodes`` worlds for ``seconds`` s each with the deterministic policy and Table 1 randomization.
 
     ``env_cfg`` holds the policy's action and observation settings; its episode length, pushes and terminations
     are set here. ``action_delay_steps`` fixes the control steps every action waits (``None``: the randomized
-    delay of training). ``body_contact_falls``: a non-foot body on the ground is a fall (``False``: only the trunk
-    too low or tilted is, :class:`~gaitlib.envs.terminations.TerminationConfig`).
+    delay of training). ``falls``: the definition of a fall counted (``trunk`` or ``contact``,
+    :mod:`gaitlib.envs.terminations`); leg touches are counted beside it either way.
     """
     randomization = env_cfg.randomization
     if action_delay_steps is not None:
@@ -89,7 +102,7 @@ def evaluate_policy(
         env_cfg,
         episode_seconds=seconds,
         pushes=PushConfig(max_force=push_max),
-        termination=replace(env_cfg.termination, heading=False, body_contact=body_contact_falls),
+        termination=env_cfg.termination.counting(falls, heading=False),
         randomization=randomization,
     )
     sim = make_backend(backend, num_worlds=episodes)
@@ -101,10 +114,15 @@ def evaluate_policy(
         mean_speed = float(t["speed"].sum() / total_alive)
         mean_ref = float(t["ref_speed"].sum() / total_alive)
         error = abs(mean_speed - mean_ref)
+        n, fell, touched = env.num_envs, int(t["fell"].sum()), int(t["touched"].sum())
         return EvalResult(
-            episodes=env.num_envs,
+            episodes=n,
             seconds=seconds,
-            fall_rate=float(t["fell"].float().mean()),
+            fall_rate=fell / n,
+            fall_ci95=wilson_interval(fell, n),
+            touch_rate=touched / n,
+            touch_ci95=wilson_interval(touched, n),
+            longest_touch_s=float(t["longest_touch"].max()) * env.dt,
             heading_loss_rate=float(t["turned"].float().mean()),
             median_heading_change_deg=float(torch.rad2deg(t["heading_change"]).median()),
             joint_rmse=float(torch.sqrt(t["sq_error"].sum() / total_alive)),
@@ -115,7 +133,7 @@ def evaluate_policy(
             mean_episode_seconds=float((counted * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
-            body_contact_falls=body_contact_falls,
+            falls=falls,
             falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
         )
     finally:
@@ -124,14 +142,16 @@ def evaluate_policy(
 
 def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
     """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, the terminations its
-    fall met (``causes``, by name), turned (more than 90 degrees from its start while up), alive steps (the episode's
+    fall met (``causes``, by name), touched (a non-foot body on the ground while up, or at the fall), the longest
+    unbroken touch (control steps), turned (more than 90 degrees from its start while up), alive steps (the episode's
     length), the steps summed over (those after which the world was still up), summed squared joint error, share of
     feet in the reference's contact state, forward and reference speed, and the last absolute heading change while
     up, rad."""
     n, dev = env.num_envs, env.device
     alive = torch.ones(n, dtype=torch.bool, device=dev)
-    t = {"fell": torch.zeros(n, dtype=torch.bool, device=dev), "turned": torch.zeros(n, dtype=torch.bool, device=dev)}
-    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
+    t = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("fell", "turned", "touched")}
+    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change",
+             "touch_run", "longest_touch")
     t |= {k: torch.zeros(n, device=dev) for k in names}
     t["causes"] = {}
     start_yaw = yaw_of(env.sim_state.root_quat)
@@ -143,6 +163,10 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         ended = dones & alive
         fell = ended & ~extras["time_outs"]
         t["fell"] |= fell
+        touch = extras["touch"].to(dev) & alive  # alive until this step: the step that ends an episode counts
+        t["touched"] |= touch
+        t["touch_run"] = torch.where(touch, t["touch_run"] + 1, 0.0)
+        t["longest_touch"] = torch.maximum(t["longest_touch"], t["touch_run"])
         for name, met in extras["fall_causes"].items():
             t["causes"][name] = (t["causes"][name] | (fell & met)) if name in t["causes"] else fell & met
         alive &= ~dones

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.errors import TransitionDataError
 from gaitlib.transition_net.dataset import BalancedSplit, balanced_split
 from gaitlib.transition_net.features import FeatureSpec, batch_features
@@ -49,6 +50,9 @@ class FitConfig:
     """Cap on the balanced samples used per pair (both labels together); ``None``: all the smaller class allows."""
     seed: int = 0
     """Seed of the split, the initial weights, the mini-batch order and dropout."""
+    falls: str = DEFAULT_FALLS
+    """The definition of a fall the labels follow (:data:`gaitlib.defaults.FALL_DEFINITIONS`): the samples'
+    ``trunk`` outcome or their ``contact`` one."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,7 @@ def fit(
     """Fit a transition-net of ``config.kind`` inputs on ``data``; raises :class:`TransitionDataError` when no
     ordered pair has both labels."""
     cfg = config
-    header, samples = data.header, data.samples
+    header, samples = data.header, data.labelled(cfg.falls).samples
     split = balanced_split(
         samples.source,
         samples.dest,

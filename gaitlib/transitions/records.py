@@ -34,11 +34,16 @@ COLUMNS: dict[str, Column] = {
     "value_source": Column("float32", None, "1", "source critic value before the switch"),
     "value_dest": Column("float32", None, "1", "destination critic value on the observation right after the switch"),
     "push_force": Column("float32", None, "N", "largest push magnitude of the source run before the switch (0: none)"),
-    "success": Column("uint8", None, "1", "alpha: 1 if no termination within the horizon after the switch"),
+    "success": Column("uint8", None, "1", "alpha: 1 if no fall (trunk definition: the trunk too low, tilted or on the "
+                      "ground) from the request until the horizon after the switch"),
     "switch_time": Column("float32", None, "s", "time of the switch since the world's episode start"),
     "world": Column("int32", None, "index", "world that produced the sample"),
     "chunk": Column("int32", None, "index", "write batch (counted over all collection runs of the file)"),
     "fall_after": Column("float32", None, "s", "time from the switch to the fall; inf: up over the whole horizon"),
+    "success_contact": Column("uint8", None, "1", "alpha by the contact definition: 1 if, besides, no non-foot body "
+                              "touched the ground from the request until the horizon after the switch"),
+    "longest_touch": Column("float32", None, "s", "longest unbroken touch of a non-foot body on the ground from the "
+                            "request until the horizon after the switch (0: none)"),
 }
 """The per-sample datasets, in file order."""
 
@@ -64,10 +69,18 @@ class TransitionBatch:
     chunk: np.ndarray
     fall_after: np.ndarray | None = None
     """``None``: not recorded (all nan)."""
+    success_contact: np.ndarray | None = None
+    """``None``: no touch recorded (``success`` by both definitions)."""
+    longest_touch: np.ndarray | None = None
+    """``None``: no touch recorded (all 0)."""
 
     def __post_init__(self) -> None:
         if self.fall_after is None:
             self.fall_after = np.full(len(self.source), np.nan)
+        if self.success_contact is None:
+            self.success_contact = np.array(self.success, copy=True)
+        if self.longest_touch is None:
+            self.longest_touch = np.zeros(len(self.source))
         for name, column in COLUMNS.items():
             setattr(self, name, np.asarray(getattr(self, name), dtype=column.dtype))
         lengths = {len(getattr(self, name)) for name in COLUMNS}
@@ -84,6 +97,15 @@ class TransitionBatch:
     def columns(self) -> dict[str, np.ndarray]:
         """Column name -> array, in :data:`COLUMNS` order."""
         return {name: getattr(self, name) for name in COLUMNS}
+
+    def labelled(self, falls: str) -> TransitionBatch:
+        """These samples with ``success`` the outcome by the definition of a fall ``falls`` (``trunk``: as stored;
+        ``contact``: ``success_contact``), for whatever reads ``success`` (fits, calibration, TMT, maps)."""
+        if falls == "trunk":
+            return self
+        if falls != "contact":
+            raise ValueError(f"falls '{falls}': trunk or contact")
+        return TransitionBatch(**(self.columns() | {"success": self.success_contact}))
 
     def select(self, index: np.ndarray | slice) -> TransitionBatch:
         """Rows ``index`` of every column."""
@@ -133,3 +155,7 @@ class TransitionData:
     def header(self) -> TransitionHeader:
         """The file's gaits, identities, latent size and settings."""
         return self.info.header
+
+    def labelled(self, falls: str) -> TransitionData:
+        """This data labelled by the definition of a fall ``falls`` (:meth:`TransitionBatch.labelled`)."""
+        return TransitionData(self.info, self.samples.labelled(falls))

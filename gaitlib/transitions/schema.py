@@ -70,8 +70,9 @@ __all__ = [
 
 SCHEMA_NAME = "gaitlib.transitions"
 """Value of the ``schema`` attribute of an index."""
-SCHEMA_VERSION = 3
-"""Version of this layout (3: the index carries ``index_sha256``); files of other versions are refused."""
+SCHEMA_VERSION = 4
+"""Version of this layout (3: the index carries ``index_sha256``; 4: each sample has both outcomes, by the ``trunk``
+and the ``contact`` definition of a fall, and its longest touch); files of other versions are refused."""
 _PART_SCHEMA = "gaitlib.transitions.part"
 _PART_NAME = re.compile(r"part-(\d{12})-(\d{12})\.h5")
 _PART_DTYPE = np.dtype([("file", "S40"), ("rows", "<i8"), ("sha256", "S64")])
