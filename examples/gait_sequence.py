@@ -4,8 +4,8 @@ switch, and the strategy picks the moment. What ``gaitlib run --from trot --to s
 
     python examples/gait_sequence.py
     python examples/gait_sequence.py --strategy tmt --sequence trot,pace,stand --video sequence.mp4
-    python examples/gait_sequence.py --library library-six --sequence stand,walk,pace,bound,trot,pronk,stand
-    python examples/gait_sequence.py --library library-six --sequence trot,pace --routed   # trot, stand, pace
+    python examples/gait_sequence.py --sequence stand,walk,pace,bound,trot,pronk,stand
+    python examples/gait_sequence.py --sequence trot,pace --routed   # trot, stand, pace
 """
 
 from __future__ import annotations
