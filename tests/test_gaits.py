@@ -104,7 +104,7 @@ def test_inverse_kinematics_round_trip() -> None:
     np.testing.assert_allclose(inverse_kinematics(forward_kinematics(joint_pos)), joint_pos, atol=1e-9)
     one_leg = leg_inverse_kinematics(forward_kinematics(joint_pos)[:, RL], leg="RL")
     np.testing.assert_allclose(one_leg, joint_pos[:, 9:12], atol=1e-9)
-    with pytest.raises(UnknownNameError):
+    with pytest.raises(UnknownNameError, match="unknown leg 'XX'"):
         leg_inverse_kinematics(np.zeros(3), leg="XX")
 
 

@@ -201,7 +201,7 @@ def test_a_held_lock_is_named_not_called_corrupt_and_readers_go_on(tiny_library,
     path = make_file(tmp_path / "t.h5", synthetic(3))
     with open_writer(path, header=HEADER) as writer:
         assert lock_path(path).read_text().strip() == str(os.getpid())
-        with pytest.raises(TransitionDataError) as caught:
+        with pytest.raises(TransitionDataError, match="is being written by process") as caught:
             collect(path, library=tiny_library, gaits=GAITS, config=FAST)
         assert str(caught.value) == f"{path} is being written by process {os.getpid()}"
         writer.append(synthetic(2, start=3))
@@ -253,8 +253,12 @@ def test_out_of_range_gait_indices_and_negative_counts_are_one_line(tmp_path) ->
 
 def test_nothing_is_created_for_a_refused_request(tiny_library, tmp_path) -> None:
     path = tmp_path / "out" / "t.h5"
-    for config in (dataclasses.replace(FAST, pairs=()), dataclasses.replace(FAST, push_max=float("inf"))):
-        with pytest.raises(GaitlibError):
+    refused = (
+        (dataclasses.replace(FAST, pairs=()), "no gait pairs to sample"),
+        (dataclasses.replace(FAST, push_max=float("inf")), "push_max must be finite and not negative"),
+    )
+    for config, message in refused:
+        with pytest.raises(GaitlibError, match=message):
             collect(path, library=tiny_library, gaits=GAITS, config=config)
     with pytest.raises(GaitlibError, match="must be finite"):
         TrialProtocol.collection(horizon_s=float("nan"))

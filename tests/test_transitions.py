@@ -4,6 +4,7 @@ with tiny policies."""
 from __future__ import annotations
 
 import dataclasses
+import re
 import shutil
 
 import h5py
@@ -82,7 +83,8 @@ def make_file(path, *batches: TransitionBatch, header: TransitionHeader = HEADER
 
 
 def one_line_error(path) -> str:
-    with pytest.raises(TransitionDataError) as caught:
+    """The one-line message with which ``validate`` refuses ``path``; every such message names the file."""
+    with pytest.raises(TransitionDataError, match=re.escape(str(path))) as caught:
         validate(path)
     message = str(caught.value)
     assert "\n" not in message

@@ -64,6 +64,12 @@ def test_the_collections_labels_are_the_benchmarks_random_verdicts() -> None:
 
 
 def test_a_protocol_with_impossible_times_is_refused_in_one_line() -> None:
-    for fields in ({"horizon_s": 0.0}, {"warmup_s": float("nan")}, {"push_lead_s": 2.0}, {"push_window": "always"}):
-        with pytest.raises(GaitlibError):
+    refused = (
+        ({"horizon_s": 0.0}, "the horizon must be positive"),
+        ({"warmup_s": float("nan")}, r"the trial's times \(.*\) must be finite"),
+        ({"push_lead_s": 2.0}, r"the push lead must lie in \[0, warm-up time\]"),
+        ({"push_window": "always"}, "push window 'always': request or source"),
+    )
+    for fields, message in refused:
+        with pytest.raises(GaitlibError, match=message):
             TrialProtocol(**fields)
