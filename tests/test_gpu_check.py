@@ -54,7 +54,11 @@ def test_tiny_check_measures_everything_on_the_cpu() -> None:
     assert collect["samples_per_s"] > 0 and collect["steps_per_sample"] > 0
 
 
-@pytest.mark.skipif(torch.cuda.is_available(), reason="with CUDA the real-size check would run")
+@pytest.mark.skipif(
+    torch.cuda.is_available(),
+    reason="a CUDA GPU is here: the real-size check would run for minutes instead of reporting that CUDA is missing "
+    "(run benchmarks/gpu_check.py itself)",
+)
 def test_real_size_check_without_cuda_reports_each_measurement_as_an_error() -> None:
     returncode, lines = run_check()
     assert [line["measure"] for line in lines] == ["sim", "sim", "parity", "train", "collect"]
