@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from itertools import pairwise, product
 from pathlib import Path
 
-from gaitlib.atomic import file_sha256, read_json, write_json
+from gaitlib.atomic import read_json, stale_temporaries, write_json
 from gaitlib.benchmark.results import group_key
 from gaitlib.errors import GaitlibError
 from gaitlib.library.store import Library
@@ -111,8 +111,12 @@ class RouteTable:
         }
 
     def save(self, library: Library) -> Path:
-        """Write the table into ``library``'s switching folder, atomically."""
-        return write_json(library.switching_dir / ROUTES_FILE, self.as_dict(), checksum=True)
+        """Write the table into ``library``'s switching folder, atomically, and remove the temporaries a killed
+        writer of it left there (call it holding the library's writer lock: no other writer runs)."""
+        path = library.switching_dir / ROUTES_FILE
+        for leftover in stale_temporaries(path):
+            leftover.unlink(missing_ok=True)
+        return write_json(path, self.as_dict(), checksum=True)
 
 
 def routes_from_results(results: dict, library: Library, *, strategy: str, push_n: float = 0.0,
@@ -124,6 +128,9 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         raise GaitlibError(f"the benchmark has no group of '{strategy}' at {push_n:g} N to measure routes with")
     identities = results["library_identities"]
     library.check_identities(identities, what="the benchmark results")
+    if results["settings"].get("switching") != library.switching_identity():
+        raise GaitlibError("the benchmark was measured with other switching models than the library holds now; "
+                           "measure it again into another --out")
     return RouteTable(
         gaits=library.order(identities),
         strategy=strategy,
@@ -131,7 +138,7 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
         rates={pair: (c["successes"], c["samples"]) for pair, c in group["cells"].items()},
         max_legs=max_legs,
         policies=dict(identities),
-        switching=_switching_identity(library),
+        switching=library.switching_identity(),
         measured_with={k: results["settings"][k] for k in ("samples", "seed", "num_worlds", "warmup_s",
                                                            "source_extra_s", "horizon_s", "deadline_s")}
         | {"falls": results["settings"]["falls"]},
@@ -147,7 +154,7 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
                            f"{library.root}")
     saved = read_json(path, header=_FORMAT, what="a gaitlib route table", error=GaitlibError)
     again = f"; measure it again: gaitlib routes --library {library.root}"
-    if saved.get("switching") != _switching_identity(library):
+    if saved.get("switching") != library.switching_identity():
         raise GaitlibError(f"{path} was measured with other switching models than the library's{again}")
     if set(saved.get("gaits", ())) != set(gaits) or saved.get("policies") != library.identities(gaits):
         raise GaitlibError(f"{path} was measured with other policies than the library's{again}")
@@ -156,9 +163,3 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
         rates={pair: (int(r[0]), int(r[1])) for pair, r in saved["rates"].items()}, policies=saved["policies"],
         switching=saved["switching"], measured_with=saved["measured_with"],
     )
-
-
-def _switching_identity(library: Library) -> str:
-    """SHA-256 of ``library``'s switching checksum list, once its files are checked against it (one line if not)."""
-    library.check_switching()
-    return file_sha256(library.switching_dir / Library.CHECKSUMS)

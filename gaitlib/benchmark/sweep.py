@@ -187,7 +187,9 @@ def run_sweep(
     cfg = config
     out = Path(out)
     pairs = _pairs(cfg, setup)
-    settings = cfg.settings() | {"pairs": [list(p) for p in pairs]}
+    # Everything that decides the numbers: a resume with any of it changed is refused (open_results names it).
+    settings = cfg.settings() | {"pairs": [list(p) for p in pairs],
+                                 "switching": setup.resources.library.switching_identity()}
     identities = setup.resources.library.identities(setup.gaits)
     open_results(out, settings, identities)  # refuse other settings before anything is created
     lock = out / "results.json.lock"

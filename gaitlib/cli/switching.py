@@ -81,9 +81,8 @@ def run_command(
     setup = load_switching(library)
     asked = sequence
     if routed:
-        from gaitlib.benchmark.routes import load_routes
-
-        sequence = list(load_routes(setup.resources.library, setup.gaits).expand(source, tuple(sequence)))
+        table = _route_table(setup, strategies=(strategy,), pushes=(push,), falls=falls)
+        sequence = list(table.expand(source, tuple(sequence)))
     trace = run_episode(
         setup,
         source=source,
@@ -220,9 +219,7 @@ def benchmark_command(
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
     detours = {}
     if routed:
-        from gaitlib.benchmark.routes import load_routes
-
-        detours = load_routes(setup.resources.library, setup.gaits).detours()
+        detours = _route_table(setup, strategies=names, pushes=swept, falls=falls).detours()
     config = SweepConfig(
         strategies=names,
         magnitudes=swept,
@@ -265,27 +262,37 @@ def routes_command(
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (the route table)."),
-    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    library: Path | None = typer.Option(
+        None, "--library", help="Library to measure and write the table into (default: $GAITLIB_LIBRARY, else your "
+        "own runs/library, made from the shipped one on its first write)."
+    ),
     falls: str = falls_option(),
+    replace: bool = typer.Option(False, "--replace", help="Write the shipped library's table (refused without it)."),
 ) -> None:
     """Measure every ordered pair with --strategy (at --push, default 0 N) and write the library's route table
     (switching/routes.json): the pairs that do better through another gait, for run and benchmark --routed."""
     from gaitlib.benchmark.routes import routes_from_results
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds
+    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
     check_worlds("--worlds", worlds, backend=backend)
-    setup = load_switching(library)
-    get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work
-    lib = setup.resources.library
-    out = out or Path("runs") / f"routes-{lib.root.resolve().name}"
-    config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
-                         backend=backend, seed=seed, falls=falls)
-    results = _sweep_with_progress(out, setup, config)
-    table = routes_from_results(results, lib, strategy=strategy, push_n=push, max_legs=max_legs)
-    path = table.save(lib)
+    target, copy_from = writing_target(library)
+    check_writable(target, replace=replace, command="gaitlib routes", what="the route table")
+    get_strategy(strategy, load_switching(copy_from or target).resources)  # unknown or missing: one line, no work
+    if copy_from is not None:
+        copy_library(copy_from, target)
+    with library_writer(target, command="gaitlib routes"):  # no refit while the pairs are measured
+        setup = load_switching(target)
+        lib = setup.resources.library
+        out = out or Path("runs") / f"routes-{_measured_identity(lib)}"
+        config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
+                             backend=backend, seed=seed, falls=falls)
+        results = _sweep_with_progress(out, setup, config)
+        table = routes_from_results(results, lib, strategy=strategy, push_n=push, max_legs=max_legs)
+        path = table.save(lib)
     if as_json:
         print(json_text(table.as_dict() | {"table": str(path), "measured_in": str(out)}))
         return
@@ -303,6 +310,41 @@ def routes_command(
     console = table_console()
     console.print(shown if detours else "every pair switches best directly")
     console.print(f"route table: {path}; measured in {out}")
+
+
+def _route_table(setup, *, strategies, pushes, falls: str):
+    """The library's route table, after saying on stderr what it was measured with, and warning where that is not
+    what this command runs (another strategy, push or definition of a fall)."""
+    from rich.console import Console
+
+    from gaitlib.benchmark.routes import load_routes
+
+    table = load_routes(setup.resources.library, setup.gaits)
+    measured = table.measured_with.get("falls", "contact")
+    console = Console(stderr=True)
+    console.print(f"gaitlib: routes from {setup.resources.library.switching_dir / 'routes.json'}, measured with "
+                  f"{table.strategy} at {table.push_n:g} N, falls counted the {measured} way", soft_wrap=True)
+    differ = [f"strategy {', '.join(s for s in strategies if s != table.strategy)}"] if set(strategies) != {
+        table.strategy} else []
+    if {round(p, 3) for p in pushes} != {round(table.push_n, 3)}:
+        differ.append(f"pushes of {', '.join(f'{p:g}' for p in pushes)} N")
+    if falls != measured:
+        differ.append(f"falls counted the {falls} way")
+    if differ:
+        console.print(f"gaitlib: warning: this run differs from what the routes were measured with: "
+                      f"{'; '.join(differ)} (measure routes for it: gaitlib routes --strategy ... --push ...)",
+                      soft_wrap=True)
+    return table
+
+
+def _measured_identity(library) -> str:
+    """12 hex digits naming what a library's measurement depends on (its policies and switching models), for a
+    default output folder that two libraries never share."""
+    import hashlib
+    import json
+
+    key = {"policies": library.identities(), "switching": library.switching_identity()}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
 
 
 def _sweep_with_progress(out: Path, setup, config, *, cluster=None) -> dict:

@@ -93,16 +93,17 @@ def train_command(
     from gaitlib.cli.progress import job_progress
     from gaitlib.gaits import clip_from_description
     from gaitlib.gaits.feasibility import check_reference
+    from gaitlib.library.target import writing_target
     from gaitlib.training import get_preset
     from gaitlib.training.distributed import Ranks
-    from gaitlib.training.target import check_target, training_target
+    from gaitlib.training.target import check_target
     from gaitlib.training.trainer import TrainRequest, train_gait
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
     chosen = get_preset(preset)
-    target, copy_from = training_target(library)
-    plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from)
+    target, copy_from = writing_target(library)
+    plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from, states=states)
     request = TrainRequest(
         description=description,
         preset=chosen,
@@ -228,7 +229,8 @@ def eval_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
     falls: str = falls_option(),
     record: bool = typer.Option(
-        False, "--record", help="Store this evaluation as the entry's own (its metadata.json; the weights untouched)."
+        False, "--record", help="Store this evaluation as the entry's own (its metadata.json; the weights untouched), "
+        "in the library --library names, else $GAITLIB_LIBRARY, else your own runs/library."
     ),
     replace: bool = typer.Option(False, "--replace", help="With --record: into the shipped library (refused without)."),
 ) -> None:
@@ -242,17 +244,19 @@ def eval_command(
     check_worlds("--episodes", episodes, backend=backend)
     values = None if impulses is None else parse_values(impulses, option="--impulses", bounds=IMPULSE_NS,
                                                         example="0:30:3")
-    lib = Library(library)
-    entry = lib.entry(gait)
-    if record:
+    if record:  # into the library a writing command writes (gaitlib.library.target), the shipped one on purpose only
         from gaitlib.cli.options import OptionError
-        from gaitlib.library.layout import is_shipped
+        from gaitlib.library.target import check_writable, copy_library, writing_target
 
         if values is not None:
             raise OptionError("--record stores the quality-bar evaluation; it does not take --impulses")
-        if is_shipped(lib.root) and not replace:
-            raise OptionError(f"--record would rewrite the shipped library's {gait}; give --replace, or --library "
-                              "your own")
+        library, copy_from = writing_target(library)
+        check_writable(library, replace=replace, command="gaitlib eval --record", what=f"the entry {gait}")
+        Library(copy_from or library).entry(gait)  # an unknown gait: one line, before the copy
+        if copy_from is not None:
+            copy_library(copy_from, library)
+    lib = Library(library)
+    entry = lib.entry(gait)
     if values is not None:
         _push_curve(entry, lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot, as_json=as_json,
                     falls=falls)
@@ -273,7 +277,10 @@ def eval_command(
         command = (f"gaitlib eval {gait} --episodes {episodes} --seconds {seconds:g} --push-max {push_max:g} --seed "
                    f"{seed} --backend {backend} --falls {falls}"
                    + ("" if action_delay is None else f" --action-delay {action_delay}"))
-        lib.record_evaluation(gait, result.as_dict() | {"seed": seed, "command": command})
+        from gaitlib.library.target import library_writer
+
+        with library_writer(lib.root, command="gaitlib eval --record"):
+            lib.record_evaluation(gait, result.as_dict() | {"seed": seed, "command": command})
     if as_json:
         print(json_text({"gait": gait} | result.as_dict()))
         return

@@ -170,23 +170,35 @@ def fit_command(
     ablation: bool = typer.Option(False, "--ablation", help="Fit all three inputs and compare with the paper."),
     evaluate: bool = typer.Option(False, "--evaluate", help="Score the library's net on --data instead of fitting."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    library: Path | None = typer.Option(
+        None, "--library", help="Library to fit into (default: $GAITLIB_LIBRARY, else your own runs/library, made "
+        "from the shipped one on its first write); with --evaluate, the library read (default: the shipped one)."
+    ),
     falls: str = falls_option(),
+    replace: bool = typer.Option(False, "--replace", help="Fit into the shipped library (refused without it)."),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
     from gaitlib.library import Library
+    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
     from gaitlib.strategies.fitting import evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 
-    lib = Library(library)
-    samples = read_all(data, current=lib.identities())
     if evaluate:
-        _report(evaluate_library(lib, samples, sources=data), as_json)
+        lib = Library(library)
+        samples = read_all(data, current=lib.identities())
+        _report(evaluate_library(lib, samples, sources=data, falls=falls), as_json)
         return
+    target, copy_from = writing_target(library)
+    check_writable(target, replace=replace, command="gaitlib fit", what="the switching models")
+    samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
-    report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls)
+    if copy_from is not None:
+        copy_library(copy_from, target)
+    with library_writer(target, command="gaitlib fit"):
+        lib = Library(target)
+        report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls)
     _report(report.as_dict(), as_json)
     if not as_json:
         if report.note:
@@ -207,7 +219,8 @@ def _report(report: dict, as_json: bool) -> None:
     rows = report.get("balanced_validation_accuracy") or {"library net": report["accuracy"]}
     pairs = [p for p in PAPER_PAIRS if any(p in r for r in rows.values())]
     pairs += sorted({p for r in rows.values() for p in r} - set(pairs))
-    table = Table(title="balanced accuracy (%) per ordered pair (paper Table 3 layout)")
+    table = Table(title=f"balanced accuracy (%) per ordered pair (paper Table 3 layout), labels by the "
+                        f"{report.get('falls', 'trunk')} definition of a fall")
     table.add_column("input")
     for pair in pairs:
         table.add_column(pair, justify="right")

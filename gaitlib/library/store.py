@@ -141,6 +141,14 @@ class Library:
             if not file.is_file() or file_sha256(file) != listed["files"].get(name):
                 raise TransitionDataError(f"{file} is missing or does not match its checksum in {path}")
 
+    def switching_identity(self) -> str | None:
+        """SHA-256 of the switching models' checksum list, once their files are checked against it (one line if
+        not): what a measurement made with them records; ``None`` for a library without switching models."""
+        if not self.switching_dir.is_dir():
+            return None
+        self.check_switching()
+        return file_sha256(self.switching_dir / self.CHECKSUMS)
+
     def write_checksums(self, folder: Path) -> Path:
         """Write ``checksums.json`` into the switching folder being staged at ``folder`` (after the other files)."""
         files = {name: file_sha256(folder / name) for name in self.BUNDLE}
@@ -204,6 +212,10 @@ class Library:
         """The latent size, action settings, observation options and action delay that the entries of ``names``
         share: policies that drive one environment and fill one transition file must agree on them."""
         entries = self.entries(names)
+        if not entries:
+            where = "has no gait entries" if self.root.is_dir() else "does not exist"
+            raise LibraryError(f"library {self.root} {where}; train a gait into it first: gaitlib train GAIT "
+                               f"--library {self.root}")
         checks = {
             "latent sizes": {e.name: e.policy.latent_dim for e in entries},
             "action settings": {e.name: (e.action["type"], e.action_scale, e.action_clip) for e in entries},

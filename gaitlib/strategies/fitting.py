@@ -150,14 +150,17 @@ def fit_library(
     return fitted
 
 
-def evaluate_library(library: Library, data: TransitionData, *, sources: Sequence[Path | str]) -> dict:
-    """Score ``library``'s transition-net on ``data`` (balanced per pair): input kind, data and accuracy per
-    ``"m-n"`` (0-1). Data of other policies than the library's are refused."""
+def evaluate_library(library: Library, data: TransitionData, *, sources: Sequence[Path | str],
+                     falls: str = DEFAULT_FALLS) -> dict:
+    """Score ``library``'s transition-net on ``data`` (balanced per pair), labelled by the definition of a fall
+    ``falls``: input kind, data, the definitions and accuracy per ``"m-n"`` (0-1). Data of other policies than the
+    library's are refused."""
     _checked_identities(library, data, sources)
     library.check_switching()
     saved = load_net(library.net_path, identities=library.identities(data.header.gaits))
-    accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, data).items()}
-    return {"input": saved.metadata["input"], "data": [str(s) for s in sources], "accuracy": accuracy}
+    accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, data.labelled(falls)).items()}
+    return {"input": saved.metadata["input"], "data": [str(s) for s in sources], "falls": falls,
+            "net_fitted_with_falls": saved.metadata["fit"].get("falls", "contact"), "accuracy": accuracy}
 
 
 def _checked_identities(library: Library, data: TransitionData, sources: Sequence[Path | str]) -> dict[str, str]:

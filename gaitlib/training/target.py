@@ -3,9 +3,10 @@
 Training never silently replaces a gait that other artefacts depend on (Isaac Lab, mjlab and legged_gym likewise
 never write over what they ship: a run writes its own output, and the user chooses what to use):
 
-- By default a trained gait goes into the user's own library, :data:`USER_LIBRARY` (or ``$GAITLIB_LIBRARY``), made
-  on its first write as a copy of the shipped library (entries and switching models), so that a retrained gait
-  joins gaits it can switch with at once and only its own pairs need new transition data.
+- By default a trained gait goes into the user's own library (:mod:`gaitlib.library.target`, the rule of every
+  command that writes a library), made on its first write as a copy of the shipped library (entries and switching
+  models), so that a retrained gait joins gaits it can switch with at once and only its own pairs need new
+  transition data.
 - The shipped library's entries are replaced only on purpose (``--replace``).
 - The tests' preset (``tiny``: it learns nothing) writes only into a library whose every entry it trained.
 - Replacing an entry of any other library is allowed, and said: before training starts, which pairs of its
@@ -15,20 +16,16 @@ never write over what they ship: a run writes its own output, and the user choos
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import is_shipped, ordered_pairs, shipped_library_dir
-from gaitlib.library.publish import staged_folder
+from gaitlib.library.layout import is_shipped, ordered_pairs
 from gaitlib.library.store import Library
+from gaitlib.library.target import USER_LIBRARY
 
-__all__ = ["TEST_PRESET", "USER_LIBRARY", "TrainTarget", "check_target", "copy_library", "training_target"]
+__all__ = ["TEST_PRESET", "TrainTarget", "check_target"]
 
-USER_LIBRARY = Path("runs") / "library"
-"""The user's own library, relative to the working folder: where ``gaitlib train`` writes by default."""
 TEST_PRESET = "tiny"
 """The preset that exists for tests: refused in a library holding an entry it did not train."""
 
@@ -45,21 +42,11 @@ class TrainTarget:
     """What the run will change beyond its own entry (stale pairs), one line each."""
 
 
-def training_target(library: Path | None) -> tuple[Path, Path | None]:
-    """(the library to write into, the library to copy there first): ``library`` if given (never copied into);
-    else ``$GAITLIB_LIBRARY``; else :data:`USER_LIBRARY`, a copy of the shipped library when it does not exist."""
-    if library is not None:
-        return Path(library), None
-    if "GAITLIB_LIBRARY" in os.environ:
-        return Path(os.environ["GAITLIB_LIBRARY"]), None
-    shipped = shipped_library_dir()
-    fresh = not USER_LIBRARY.exists() and shipped.is_dir()
-    return USER_LIBRARY, shipped if fresh else None
-
-
-def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_from: Path | None = None) -> TrainTarget:
+def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_from: Path | None = None,
+                 states: Path | None = None) -> TrainTarget:
     """Refuse, before any work, a run that would replace a shipped entry without ``replace`` or put the tests'
-    preset among trained gaits; otherwise say which switching pairs the new entry will leave stale."""
+    preset among trained gaits; otherwise say which switching pairs the new entry will leave stale, and, when the
+    handover ``states`` were recorded with other policies than the library's, whose they are."""
     lib = Library(copy_from if copy_from is not None else library)
     names = lib.gaits()
     if is_shipped(lib.root) and copy_from is None and gait in names and not replace:
@@ -82,20 +69,19 @@ def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_f
             f"replacing {Path(library) / gait}: the switching models there were fitted on the old {gait}, so pairs "
             f"{', '.join(stale)} will need new transition data (gaitlib library --library {library} says how)"
         )
+    if states is not None:
+        from gaitlib.envs.handover import load_states
+
+        recorded, _ = load_states(states)
+        current = lib.identities()
+        other = sorted(g for g, identity in recorded.identities.items() if g != gait and current.get(g) != identity)
+        if other:
+            notes.append(
+                f"the handover states in {states} come from policies that are not {library}'s: {', '.join(other)} "
+                f"({'gaits it lacks or ' if set(other) - set(current) else ''}other policies of these gaits); the new "
+                f"{gait} learns to take over from those"
+            )
     return TrainTarget(Path(library), copy_from, tuple(notes))
-
-
-def copy_library(source: Path, destination: Path) -> Path:
-    """Copy the entries and switching models of library ``source`` into the new library ``destination``, published
-    in one step (a kill leaves no library or the whole copy)."""
-    if destination.exists():
-        raise GaitlibError(f"{destination} exists already; it is not replaced by a copy of {source}")
-    lib = Library(source)
-    with staged_folder(destination) as staging:
-        for name in [*lib.gaits(), Library.SWITCHING]:
-            if (lib.root / name).is_dir():
-                shutil.copytree(lib.root / name, staging / name)
-    return destination
 
 
 def _preset(lib: Library, name: str) -> str | None:

@@ -20,20 +20,21 @@ from pathlib import Path
 import torch
 from rsl_rl.runners import OnPolicyRunner
 
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import atomic_path, release_lock, take_lock
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.library.store import Library
+from gaitlib.library.target import copy_library, library_writer
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_in_sync, rank_device
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
 from gaitlib.training.switch_start import handover_states
-from gaitlib.training.target import check_target, copy_library
+from gaitlib.training.target import check_target
 
 __all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "train_gait"]
 
@@ -142,6 +143,7 @@ class GaitRunner(OnPolicyRunner):
             "preset": self.request.preset.name,
             "switch_start": self.request.switch_start,
             "seed": self.request.seed,
+            "library": str(Path(self.request.library).resolve()),
             "world_size": self.ranks.world_size,
             "samples": self.samples,
             "elapsed_s": self.elapsed,
@@ -155,12 +157,12 @@ class GaitRunner(OnPolicyRunner):
         latest = self.checkpoints / "latest.pt"
         saved = _read_checkpoint(latest, device=self.device)
         record = saved["infos"]
-        gait, preset = self.request.description.name, self.request.preset.name
-        if (record["gait"], record["preset"]) != (gait, preset):
-            raise GaitlibError(
-                f"checkpoint {latest} is for gait '{record['gait']}' with preset '{record['preset']}', "
-                f"not '{gait}' with '{preset}'"
-            )
+        asked = {"gait": self.request.description.name, "preset": self.request.preset.name,
+                 "seed": self.request.seed, "library": str(Path(self.request.library).resolve())}
+        differ = [f"{k} {record.get(k)!r}, not {v!r}" for k, v in asked.items() if record.get(k, v) != v]
+        if differ:
+            raise GaitlibError(f"checkpoint {latest} is of another training run ({'; '.join(differ)}); resume it as "
+                               "it was started, or train afresh into another --run-dir")
         if record.get("switch_start", 0.0) != self.request.switch_start:
             raise GaitlibError(
                 f"checkpoint {latest} trained with --switch-start {record.get('switch_start', 0.0):g}, not "
@@ -250,6 +252,26 @@ def train_gait(
         copy_from=request.copy_from,
     )
     ranks = Ranks.from_env()
+    if not ranks.main:
+        return _train(request, ranks, on_iteration)
+    lock = request.run_dir / ".run.lock"
+    fd = take_lock(lock, writing=f"training run folder {request.run_dir}", error=GaitlibError)
+    try:
+        latest = request.run_dir / "checkpoints" / "latest.pt"
+        if not request.resume and latest.is_file():
+            raise GaitlibError(
+                f"{request.run_dir} belongs to another training run (it holds {latest}); continue that run with "
+                "--resume, or give this one its own --run-dir"
+            )
+        return _train(request, ranks, on_iteration)
+    finally:
+        release_lock(lock, fd)
+
+
+def _train(
+    request: TrainRequest, ranks: Ranks, on_iteration: Callable[[IterationStats], None] | None
+) -> TrainResult | None:
+    """:func:`train_gait` once its run folder is its own."""
     seed = request.seed + ranks.rank
     torch.manual_seed(seed)
     preset = request.preset
@@ -296,37 +318,38 @@ def _finish(
     )
     if request.copy_from is not None and not request.library.exists():
         copy_library(request.copy_from, request.library)
-    entry = Library(request.library).save_entry(
-        description=request.description,
-        actor=alg.get_policy(),
-        critic=alg.critic,
-        networks={
-            "actor_hidden": list(preset.actor_hidden),
-            "critic_hidden": list(preset.critic_hidden),
-            "activation": preset.activation,
-        },
-        action={"type": "residual_to_reference", "scale": env_cfg.action_scale, "clip": env_cfg.action_clip},
-        observation=env_cfg.observation,
-        training={
-            "preset": dataclasses.asdict(preset),
-            "backend": backend_name,
-            "iterations": runner.current_learning_iteration,
-            "samples": runner.samples,
-            "wall_clock_s": round(runner.elapsed, 1),
-            "seed": request.seed,
-            "switch_start": switch_start,
-            "push_max_n": preset.push_limit(runner.current_learning_iteration, request.iterations),
-            "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
-            "randomization": dataclasses.asdict(env_cfg.randomization),
-            "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},
-            "episode_seconds": preset.episode_seconds,
-            "curve": {
-                "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
-                "rows": _thin_curve(runner.curve),
+    with library_writer(request.library, command="gaitlib train"):  # one writer of the library at a time
+        entry = Library(request.library).save_entry(
+            description=request.description,
+            actor=alg.get_policy(),
+            critic=alg.critic,
+            networks={
+                "actor_hidden": list(preset.actor_hidden),
+                "critic_hidden": list(preset.critic_hidden),
+                "activation": preset.activation,
             },
-        },
-        evaluation=evaluation.as_dict(),
-    )
+            action={"type": "residual_to_reference", "scale": env_cfg.action_scale, "clip": env_cfg.action_clip},
+            observation=env_cfg.observation,
+            training={
+                "preset": dataclasses.asdict(preset),
+                "backend": backend_name,
+                "iterations": runner.current_learning_iteration,
+                "samples": runner.samples,
+                "wall_clock_s": round(runner.elapsed, 1),
+                "seed": request.seed,
+                "switch_start": switch_start,
+                "push_max_n": preset.push_limit(runner.current_learning_iteration, request.iterations),
+                "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
+                "randomization": dataclasses.asdict(env_cfg.randomization),
+                "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},
+                "episode_seconds": preset.episode_seconds,
+                "curve": {
+                    "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
+                    "rows": _thin_curve(runner.curve),
+                },
+            },
+            evaluation=evaluation.as_dict(),
+        )
     return TrainResult(
         entry=entry,
         iterations=runner.current_learning_iteration,
