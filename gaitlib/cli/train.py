@@ -84,9 +84,31 @@ def train_command(
     eval_episodes: int = bounded(
         64, "--eval-episodes", help="Episodes of the final evaluation (one world each);", bounds=WORLDS
     ),
+    push_kind: str = typer.Option(
+        "force", "--push-kind", help="Training pushes: force (the paper's, up to the preset's largest force, 0.1-0.3 s "
+        "every 1-3 s) or kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, --kick-interval)."
+    ),
+    kick_max: float = bounded(1.0, "--kick-max", help="With --push-kind kick: the largest change of speed a kick "
+                              "gives;", bounds=Bounds(low=0, high=5, unit="m/s")),
+    kick_interval: str = typer.Option("1:3", "--kick-interval", help="With --push-kind kick: the quiet time before "
+                                      "each kick, LOW:HIGH s, in (0, 60]."),
+    terminate: str = typer.Option(
+        "contact", "--terminate", help="What ends a training episode: contact (any non-foot body on the ground, the "
+        "paper's) or trunk (the trunk too low, tilted or on the ground: legged_gym's)."
+    ),
+    contact_penalty: float = bounded(0.0, "--contact-penalty", help="Reward taken off per control step while a "
+                                     "non-foot body touches the ground;", bounds=Bounds(low=0, high=10)),
+    gamma: float | None = bounded(None, "--gamma", help="PPO discount (default: the preset's, the paper's 0.95);",
+                                  bounds=Bounds(low=0, high=1, low_open=True)),
+    lam: float | None = bounded(None, "--lam", help="GAE lambda (default: the preset's);",
+                                bounds=Bounds(low=0, high=1, low_open=True)),
+    action_delay: int | None = bounded(None, "--action-delay", help="Train with every action this many control "
+                                       "steps late, fixed (default: Table 1's random 0-1);",
+                                       bounds=Bounds(low=0, high=3, whole=True)),
 ) -> None:
     """Train one gait policy with PPO and write it into a library (other gaits are never touched; the shipped
-    library only with --replace)."""
+    library only with --replace). The recipe's robustness levers (--push-kind, --terminate, --contact-penalty,
+    --gamma, --lam, --action-delay) are recorded in the entry's metadata."""
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
@@ -96,12 +118,16 @@ def train_command(
     from gaitlib.library.target import writing_target
     from gaitlib.training import get_preset
     from gaitlib.training.distributed import Ranks
+    from gaitlib.training.recipe import Recipe
     from gaitlib.training.target import check_target
     from gaitlib.training.trainer import TrainRequest, train_gait
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
-    chosen = get_preset(preset)
+    recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_interval=_interval(kick_interval),
+                    terminate=terminate, contact_penalty=contact_penalty, gamma=gamma, lam=lam,
+                    action_delay=action_delay)
+    chosen = recipe.preset(get_preset(preset))
     target, copy_from = writing_target(library)
     plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from, states=states)
     request = TrainRequest(
@@ -120,6 +146,7 @@ def train_command(
         resume=resume,
         checkpoint_every=checkpoint_every,
         eval_episodes=eval_episodes,
+        recipe=recipe,
     )
     if not Ranks.from_env().main:  # under torchrun, rank 0 alone reports
         train_gait(request)
@@ -189,6 +216,17 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
         touches = f"{100 * p.touches / p.episodes:.1f}% [{100 * p.touch_ci95[0]:.1f}, {100 * p.touch_ci95[1]:.1f}]"
         table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate, *sectors, touches, f"{p.longest_touch_s:.2f}")
     table_console().print(table)
+
+
+def _interval(text: str) -> tuple[float, float]:
+    """``LOW:HIGH`` seconds as a pair (the recipe checks the range); anything else is one line."""
+    from gaitlib.cli.options import OptionError
+
+    try:
+        low, high = (float(part) for part in text.split(":"))
+    except ValueError:
+        raise OptionError(f"--kick-interval takes LOW:HIGH in seconds (e.g. 1:3), got '{text}'") from None
+    return low, high
 
 
 def _rate(rate: float, ci95: tuple[float, float]) -> str:

@@ -65,6 +65,9 @@ class EnvConfig:
     """Reference state initialization at a uniformly random phase (else at phase 0)."""
     observation: obs_fn.ObservationConfig = field(default_factory=obs_fn.ObservationConfig)
     """Options of the actor observation (they must be those the policies were trained with)."""
+    contact_penalty: float = 0.0
+    """Reward taken off per control step while a non-foot body touches the ground (training with trunk-only
+    terminations: :mod:`gaitlib.training.recipe`); 0: none."""
 
 
 class ImitationEnv(VecEnv):
@@ -144,6 +147,8 @@ class ImitationEnv(VecEnv):
         observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
         ref = observed[0]
         reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
+        if cfg.contact_penalty:
+            reward = reward - cfg.contact_penalty * state.body_contact.float()
         causes = fall_causes(state.body_contact, state.trunk_contact, state.root_pos[:, 2], state.root_quat,
                              ref.root_quat, cfg.termination)
         terminated = diverged | any_cause(causes)
@@ -155,7 +160,8 @@ class ImitationEnv(VecEnv):
             "fall_causes": causes | {"diverged": diverged},
             "touch": state.body_contact,  # a non-foot body on the ground this step, whatever ends the episode
             "log": {f"/reward/{name}": value.mean() for name, value in self._terms.items()}
-            | {"/termination/rate": terminated.float().mean(), "/termination/diverged": diverged.float().mean()},
+            | {"/termination/rate": terminated.float().mean(), "/termination/diverged": diverged.float().mean(),
+               "/termination/touch": state.body_contact.float().mean()},
         }
         done_ids = dones.nonzero().squeeze(1)
         self._record_frame()

@@ -14,7 +14,7 @@ import dataclasses
 import io
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -22,7 +22,6 @@ from rsl_rl.runners import OnPolicyRunner
 
 from gaitlib.atomic import atomic_path, release_lock, take_lock
 from gaitlib.envs import EnvConfig, ImitationEnv
-from gaitlib.envs.randomization import PushConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.library.policy import GaitPolicy
@@ -33,6 +32,7 @@ from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_i
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
+from gaitlib.training.recipe import Recipe
 from gaitlib.training.switch_start import handover_states
 from gaitlib.training.target import check_target
 
@@ -67,6 +67,9 @@ class TrainRequest:
     switch_start: float = 0.0
     """The share of training episodes (resets) that start from a handover state, in [0, 1] (0: the paper's
     recipe)."""
+    recipe: Recipe = field(default_factory=Recipe)
+    """The robustness levers: pushes, terminations, contact penalty, discount, action delay (the defaults: the
+    shipped library's recipe; the preset given is the one trained with, its discount already the recipe's)."""
     run_dir: Path
     """Checkpoints and TensorBoard logs (``checkpoints/latest.pt``, ``events.*``)."""
     backend: str = "auto"
@@ -144,6 +147,7 @@ class GaitRunner(OnPolicyRunner):
             "switch_start": self.request.switch_start,
             "seed": self.request.seed,
             "library": str(Path(self.request.library).resolve()),
+            "recipe": self.request.recipe.as_dict(),
             "world_size": self.ranks.world_size,
             "samples": self.samples,
             "elapsed_s": self.elapsed,
@@ -158,7 +162,8 @@ class GaitRunner(OnPolicyRunner):
         saved = _read_checkpoint(latest, device=self.device)
         record = saved["infos"]
         asked = {"gait": self.request.description.name, "preset": self.request.preset.name,
-                 "seed": self.request.seed, "library": str(Path(self.request.library).resolve())}
+                 "seed": self.request.seed, "library": str(Path(self.request.library).resolve()),
+                 "recipe": self.request.recipe.as_dict()}
         differ = [f"{k} {record.get(k)!r}, not {v!r}" for k, v in asked.items() if record.get(k, v) != v]
         if differ:
             raise GaitlibError(f"checkpoint {latest} is of another training run ({'; '.join(differ)}); resume it as "
@@ -182,7 +187,9 @@ class GaitRunner(OnPolicyRunner):
         """One rsl-rl iteration (rollout, returns, PPO update); its statistics, also added to the curve."""
         log = self.logger
         log.clear()
-        self.env.set_push_max(self.request.preset.push_limit(self.current_learning_iteration, self.request.iterations))
+        request = self.request
+        self.env.set_push_max(request.recipe.push_limit(request.preset, self.current_learning_iteration,
+                                                        request.iterations, control_dt=self.env.dt))
         with contextlib.redirect_stdout(io.StringIO()) if self.is_distributed else contextlib.nullcontext():
             super().learn(1)  # leaves current_learning_iteration at this iteration's index (and, distributed,
             # prints that it synchronizes the parameters)
@@ -280,9 +287,9 @@ def _train(
     states, switch_start = handover_states(
         request.states, request.switch_start, gait=request.description.name
     )
-    # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the preset's curriculum.
-    env_cfg = EnvConfig(episode_seconds=preset.episode_seconds, pushes=PushConfig(max_force=0.0))
     sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
+    # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the recipe's curriculum.
+    env_cfg = request.recipe.env_config(EnvConfig(episode_seconds=preset.episode_seconds), control_dt=sim.control_dt)
     try:
         env = ImitationEnv(
             sim, [clip], env_cfg, seed=seed, handover=states, handover_share=request.switch_start if states else 0.0
@@ -338,7 +345,9 @@ def _finish(
                 "wall_clock_s": round(runner.elapsed, 1),
                 "seed": request.seed,
                 "switch_start": switch_start,
-                "push_max_n": preset.push_limit(runner.current_learning_iteration, request.iterations),
+                "recipe": request.recipe.as_dict(),
+                "push_max_n": request.recipe.push_limit(preset, runner.current_learning_iteration, request.iterations,
+                                                        control_dt=runner.env.dt),
                 "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
                 "randomization": dataclasses.asdict(env_cfg.randomization),
                 "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},

@@ -1,0 +1,110 @@
+"""The training recipe's robustness levers, one place: how a gait is pushed, what ends its episodes, what its leg
+touches cost, its discount and its action delay. The defaults are the shipped library's recipe; each lever is an
+option of ``gaitlib train`` and is recorded in the entry's metadata (``training.recipe``).
+
+The field's practice each lever follows:
+
+- pushes as velocity kicks: legged_gym sets the base's horizontal velocity to a random value of up to 1 m/s every
+  15 s (``push_robots``, ``max_push_vel_xy = 1.``, github.com/leggedrobotics/legged_gym ``legged_robot_config.py``);
+  mjlab adds up to 0.5 m/s every 1-3 s. Here a kick is a horizontal force held for one control step whose impulse
+  gives the nominal A1 (:data:`~gaitlib.robots.a1.constants.TOTAL_MASS`) the drawn change of speed; a world whose
+  mass is randomized heavier or lighter changes speed by that much less or more.
+- terminations on the trunk only (legged_gym's ``terminate_after_contacts_on = ["base"]``), a leg's touch then
+  penalized per control step (legged_gym's ``penalize_contacts_on = ["thigh", "calf"]``, ``collision`` scale -1).
+- the discount: rsl-rl's locomotion tasks use 0.99 (lambda 0.95) against the paper's 0.95 (lambda 0.95), a horizon
+  of about 0.7 s at 30 Hz, shorter than a fall takes to unfold.
+- the action delay: trained at a fixed number of control steps instead of Table 1's random 0-1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.terminations import TerminationConfig
+from gaitlib.errors import GaitlibError
+from gaitlib.robots.a1.constants import TOTAL_MASS
+from gaitlib.training.presets import TrainPreset
+
+__all__ = ["PUSH_KINDS", "Recipe"]
+
+PUSH_KINDS = ("force", "kick")
+"""``force``: the paper's pushes (up to the preset's largest force, 0.1-0.3 s, every 1-3 s); ``kick``: velocity
+kicks (:class:`Recipe`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Recipe:
+    """The robustness levers of a training run (the defaults: the shipped library's recipe)."""
+
+    push_kind: str = "force"
+    """``force`` (the paper's pushes, up to the preset's ``push_max`` N) or ``kick`` (velocity kicks)."""
+    kick_max: float = 1.0
+    """With ``kick``: the largest change of horizontal speed a kick gives, m/s (legged_gym: 1.0)."""
+    kick_interval: tuple[float, float] = (1.0, 3.0)
+    """With ``kick``: the quiet time before each kick, uniform in this range, s (mjlab: 1-3; legged_gym: 15)."""
+    terminate: str = "contact"
+    """What ends a training episode as a fall: ``contact`` (any non-foot body on the ground, the paper's) or
+    ``trunk`` (the trunk too low, tilted or on the ground; a leg's touch ridden through)."""
+    contact_penalty: float = 0.0
+    """Reward taken off per control step while a non-foot body touches the ground (the imitation reward lies in
+    [0, 1] per step), >= 0."""
+    gamma: float | None = None
+    """PPO discount (``None``: the preset's; the paper's 0.95)."""
+    lam: float | None = None
+    """GAE lambda (``None``: the preset's)."""
+    action_delay: int | None = None
+    """Control steps every training action waits, fixed (``None``: Table 1's random 0-1)."""
+
+    def __post_init__(self) -> None:
+        if self.push_kind not in PUSH_KINDS:
+            raise GaitlibError(f"--push-kind takes {' or '.join(PUSH_KINDS)}, got '{self.push_kind}'")
+        if self.terminate not in FALL_DEFINITIONS:
+            raise GaitlibError(f"--terminate takes {' or '.join(FALL_DEFINITIONS)}, got '{self.terminate}'")
+        low, high = self.kick_interval
+        if not (math.isfinite(self.kick_max) and 0 <= self.kick_max <= 5 and 0 < low <= high <= 60):
+            raise GaitlibError("kicks: --kick-max in [0, 5] m/s, --kick-interval LOW:HIGH with 0 < LOW <= HIGH <= 60 s")
+        if not (math.isfinite(self.contact_penalty) and 0 <= self.contact_penalty <= 10):
+            raise GaitlibError(f"--contact-penalty must lie in [0, 10] per step, got {self.contact_penalty:g}")
+        for name in ("gamma", "lam"):
+            value = getattr(self, name)
+            if value is not None and not 0 < value <= 1:
+                raise GaitlibError(f"--{name} must lie in (0, 1], got {value:g}")
+        if self.action_delay is not None and not 0 <= self.action_delay <= 3:
+            raise GaitlibError(f"--action-delay must be 0-3 control steps, got {self.action_delay}")
+
+    def preset(self, preset: TrainPreset) -> TrainPreset:
+        """``preset`` with this recipe's discount and lambda."""
+        changes = {k: v for k, v in (("gamma", self.gamma), ("lam", self.lam)) if v is not None}
+        return dataclasses.replace(preset, **changes)
+
+    def env_config(self, cfg: EnvConfig, *, control_dt: float) -> EnvConfig:
+        """``cfg`` with this recipe's pushes (off: the curriculum raises them, :meth:`push_limit`), terminations,
+        contact penalty and action delay."""
+        pushes = PushConfig(max_force=0.0)
+        if self.push_kind == "kick":
+            pushes = PushConfig(max_force=0.0, duration=(control_dt, control_dt), interval=self.kick_interval)
+        randomization = cfg.randomization
+        if self.action_delay is not None:
+            randomization = dataclasses.replace(randomization, action_delay_steps=(self.action_delay,) * 2)
+        return dataclasses.replace(
+            cfg, pushes=pushes, termination=TerminationConfig().counting(self.terminate),
+            contact_penalty=self.contact_penalty, randomization=randomization,
+        )
+
+    def push_limit(self, preset: TrainPreset, iteration: int, iterations: int, *, control_dt: float) -> float:
+        """The largest push force during ``iteration`` of a run of ``iterations``, N: the preset's curriculum for
+        ``force``; for ``kick``, the force that gives the nominal A1 the curriculum's share of :attr:`kick_max` in one
+        control step."""
+        if self.push_kind == "force":
+            return preset.push_limit(iteration, iterations)
+        share = min(1.0, iteration / preset.push_ramp_iterations(iterations))
+        return TOTAL_MASS * self.kick_max * share / control_dt
+
+    def as_dict(self) -> dict:
+        """What the entry's metadata records."""
+        return dataclasses.asdict(self)

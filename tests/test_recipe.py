@@ -1,0 +1,107 @@
+"""The training recipe's robustness levers on the real simulator: a velocity kick changes the trunk's speed by what
+it says, trunk-only terminations ride a leg's touch through and its penalty costs reward, and a run records every
+lever in its entry."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+import torch
+from cli_runner import gaitlib_quick
+
+from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.errors import GaitlibError
+from gaitlib.gaits import clip_from_description, get_gait
+from gaitlib.robots import get_robot
+from gaitlib.robots.a1.constants import TOTAL_MASS
+from gaitlib.sim import make_backend, standing_state
+from gaitlib.training import get_preset
+from gaitlib.training.recipe import Recipe
+
+
+def test_a_kick_changes_the_trunks_speed_by_the_drawn_amount() -> None:
+    """In the air, a kick of the largest size gives the nominal A1 ``kick_max`` of horizontal speed within the one
+    control step it lasts (the trunk's own speed within a few percent of it: the legs, held by their PD loops,
+    take some of the momentum)."""
+    recipe = Recipe(push_kind="kick", kick_max=1.0, kick_interval=(0.1, 0.1))
+    sim = make_backend("mujoco", num_worlds=4)
+    try:
+        cfg = recipe.env_config(EnvConfig(episode_seconds=5.0), control_dt=sim.control_dt)
+        force = recipe.push_limit(get_preset("cpu"), 10**6, 10, control_dt=sim.control_dt)
+        assert force == pytest.approx(TOTAL_MASS * 1.0 / sim.control_dt)
+        state = standing_state(get_robot("a1"), 4)
+        state.root_pos[:, 2] = 2.0  # far above the ground: only the kick and gravity act
+        sim.reset(torch.arange(4), state)
+        force_xy = torch.tensor([[force, 0.0, 0.0], [0.0, force, 0.0], [0.0, 0.0, 0.0], [force, 0.0, 0.0]])
+        sim.set_trunk_force(torch.arange(4), force_xy)
+        sim.step()
+        speed = sim.state().root_lin_vel[:, :2].norm(dim=1)
+        assert speed[:2].tolist() == pytest.approx([1.0, 1.0], abs=0.05) and speed[2] < 1e-3
+        assert cfg.pushes.duration == (sim.control_dt, sim.control_dt) and cfg.pushes.interval == (0.1, 0.1)
+    finally:
+        sim.close()
+
+
+def test_trunk_only_terminations_ride_a_touch_through_and_the_penalty_costs_reward() -> None:
+    clip = clip_from_description(get_gait("stand"))
+    rewards = {}
+    for terminate, penalty in (("contact", 0.0), ("trunk", 0.0), ("trunk", 0.5)):
+        sim = make_backend("mujoco", num_worlds=1)
+        try:
+            recipe = Recipe(terminate=terminate, contact_penalty=penalty, action_delay=0)
+            cfg = recipe.env_config(EnvConfig(episode_seconds=5.0), control_dt=sim.control_dt)
+            cfg = dataclasses.replace(cfg, randomization=dataclasses.replace(cfg.randomization, enabled=False))
+            env = ImitationEnv(sim, [clip], cfg, seed=0)
+            kneel = torch.tensor([[0.0, 0.0, -2.7] * 4])  # on its knees, the trunk up: a leg's touch
+            state = standing_state(get_robot("a1"), 1)
+            state.joint_pos[:], state.root_pos[0, 2] = kneel, 0.3
+            sim.reset(torch.arange(1), state)
+            for _ in range(10):
+                sim.set_pd_targets(kneel)
+                sim.step()
+            assert bool(sim.state().body_contact[0]) and not bool(sim.state().trunk_contact[0])
+            hold = (kneel - env.reference.frame(env.dt).joint_pos) / cfg.action_scale  # targets: the kneel
+            _, reward, dones, extras = env.step(hold)
+            rewards[(terminate, penalty)] = float(reward[0])
+            assert bool(extras["touch"][0])
+            assert bool(dones[0]) == (terminate == "contact")
+        finally:
+            sim.close()
+    assert rewards[("trunk", 0.5)] == pytest.approx(rewards[("trunk", 0.0)] - 0.5, abs=1e-5)
+
+
+def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
+    library = tmp_path / "library"
+    trained = gaitlib_quick(
+        "train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--backend", "mujoco",
+        "--library", str(library), "--run-dir", str(tmp_path / "runs"), "--push-kind", "kick", "--kick-max", "0.5",
+        "--kick-interval", "1:2", "--terminate", "trunk", "--contact-penalty", "0.2", "--gamma", "0.99",
+        "--lam", "0.9", "--action-delay", "1",
+    )
+    assert trained.returncode == 0, trained.stderr
+    training = json.loads((library / "stand" / "metadata.json").read_text())["training"]
+    assert training["recipe"] == {"push_kind": "kick", "kick_max": 0.5, "kick_interval": [1.0, 2.0],
+                                  "terminate": "trunk", "contact_penalty": 0.2, "gamma": 0.99, "lam": 0.9,
+                                  "action_delay": 1}
+    assert training["preset"]["gamma"] == 0.99 and training["preset"]["lam"] == 0.9
+    assert training["randomization"]["action_delay_steps"] == [1, 1]
+    share = min(1.0, 1 / get_preset("tiny").push_ramp_iterations(1))  # of the kick curriculum after one iteration
+    assert training["push_max_n"] == pytest.approx(TOTAL_MASS * 0.5 * share * 30, rel=1e-5)  # m dv / dt, dt 1/30 s
+
+
+@pytest.mark.parametrize(
+    ("fields", "line"),
+    [
+        ({"push_kind": "shove"}, "--push-kind takes force or kick, got 'shove'"),
+        ({"terminate": "legs"}, "--terminate takes trunk or contact, got 'legs'"),
+        ({"kick_interval": (3.0, 1.0)}, "--kick-interval LOW:HIGH with 0 < LOW <= HIGH <= 60 s"),
+        ({"contact_penalty": -1.0}, "--contact-penalty must lie in [0, 10] per step, got -1"),
+        ({"gamma": 0.0}, "--gamma must lie in (0, 1], got 0"),
+        ({"action_delay": 7}, "--action-delay must be 0-3 control steps, got 7"),
+    ],
+)
+def test_an_impossible_lever_is_one_line(fields, line) -> None:
+    with pytest.raises(GaitlibError, match=line.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")):
+        Recipe(**fields)
