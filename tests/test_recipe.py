@@ -12,8 +12,10 @@ import torch
 from cli_runner import gaitlib_quick
 
 from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import clip_from_description, get_gait
+from gaitlib.library import Library
 from gaitlib.robots import get_robot
 from gaitlib.robots.a1.constants import TOTAL_MASS
 from gaitlib.sim import make_backend, standing_state
@@ -78,15 +80,20 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
         "train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--backend", "mujoco",
         "--library", str(library), "--run-dir", str(tmp_path / "runs"), "--push-kind", "kick", "--kick-max", "0.5",
         "--kick-interval", "1:2", "--terminate", "trunk", "--contact-penalty", "0.2", "--gamma", "0.99",
-        "--lam", "0.9", "--action-delay", "1",
+        "--lam", "0.9", "--action-delay", "1", "--critic-delay",
     )
     assert trained.returncode == 0, trained.stderr
     training = json.loads((library / "stand" / "metadata.json").read_text())["training"]
     assert training["recipe"] == {"push_kind": "kick", "kick_max": 0.5, "kick_interval": [1.0, 2.0],
                                   "terminate": "trunk", "contact_penalty": 0.2, "gamma": 0.99, "lam": 0.9,
-                                  "action_delay": 1}
+                                  "action_delay": 1, "critic_delay": True}
     assert training["preset"]["gamma"] == 0.99 and training["preset"]["lam"] == 0.9
     assert training["randomization"]["action_delay_steps"] == [1, 1]
+    entry = Library(library).entry("stand")  # the critic reads the delay after the other privileged extras
+    assert entry.observation.critic_delay and entry.observation.privileged_dim == obs_fn.PRIVILEGED_DIM + 1
+    assert json.loads((library / "stand" / "metadata.json").read_text())["observation"]["critic_delay"] == [
+        "action_delay:1"
+    ]
     share = min(1.0, 1 / get_preset("tiny").push_ramp_iterations(1))  # of the kick curriculum after one iteration
     assert training["push_max_n"] == pytest.approx(TOTAL_MASS * 0.5 * share * 30, rel=1e-5)  # m dv / dt, dt 1/30 s
 

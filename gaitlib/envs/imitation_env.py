@@ -377,5 +377,6 @@ class ImitationEnv(VecEnv):
             reference.wrapped_phase,
             self._dynamics[ids],
             self.push_force[ids],
+            self._params.action_delay.to(self.device)[ids] if self.cfg.observation.critic_delay else None,
         )
         return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[len(actor)])

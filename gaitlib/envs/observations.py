@@ -14,7 +14,8 @@ Actor observation (158) = state s_t (102) + reference g_t (56):
 
 Critic (privileged) extras, :data:`PRIVILEGED` (14): trunk linear velocity in the trunk frame, trunk height, gait
 phase as sin/cos, the world's randomized :data:`DYNAMICS` (gravity scale, mass scale, friction, kp in units of the
-robot's default stiffness, kd) and the push force in units of 100 N.
+robot's default stiffness, kd) and the push force in units of 100 N; with
+:attr:`ObservationConfig.critic_delay`, one more, :data:`DELAY`: the control steps every action of the world waits.
 """
 
 from __future__ import annotations
@@ -120,6 +121,8 @@ PRIVILEGED: tuple[Field, ...] = (
 )
 """Critic extras."""
 PRIVILEGED_DIM = width(PRIVILEGED)  # 14
+DELAY: tuple[Field, ...] = (Field("action_delay", 1),)
+"""The critic's extra with :attr:`ObservationConfig.critic_delay`: the world's action delay, control steps."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -128,6 +131,19 @@ class ObservationConfig:
 
     heading: bool = True
     """End the actor observation with :data:`HEADING` (159 values); ``False`` is gaitlib 0.1's 158-value layout."""
+    critic_delay: bool = False
+    """End the critic's extras with :data:`DELAY`, the world's action delay (privileged: the actor does not see it;
+    a training lever, :mod:`gaitlib.training.recipe`)."""
+
+    @property
+    def privileged(self) -> tuple[Field, ...]:
+        """The critic's extras."""
+        return PRIVILEGED + (DELAY if self.critic_delay else ())
+
+    @property
+    def privileged_dim(self) -> int:
+        """Width of the critic's extras."""
+        return width(self.privileged)
 
     @property
     def actor_dim(self) -> int:
@@ -143,19 +159,23 @@ def layout(cfg: ObservationConfig = ObservationConfig()) -> dict[str, object]:
         "reference_offsets": list(REFERENCE_OFFSETS),
         "reference_frame": [f"{f.name}:{f.width}" for f in REFERENCE_FRAME],
         "actor_dim": cfg.actor_dim,
-        "privileged_dim": PRIVILEGED_DIM,
+        "privileged_dim": cfg.privileged_dim,
     }
     if cfg.heading:
         described["heading"] = [f"{f.name}:{f.width}" for f in HEADING]
+    if cfg.critic_delay:
+        described["critic_delay"] = [f"{f.name}:{f.width}" for f in DELAY]
     return described
 
 
 def observation_config(described: object) -> ObservationConfig | None:
     """The options whose :func:`layout` is ``described`` (as stored with a policy); ``None`` if no options of this
     gaitlib give it."""
-    for cfg in (ObservationConfig(heading=True), ObservationConfig(heading=False)):
-        if described == layout(cfg):
-            return cfg
+    for heading in (True, False):
+        for critic_delay in (False, True):
+            cfg = ObservationConfig(heading=heading, critic_delay=critic_delay)
+            if described == layout(cfg):
+                return cfg
     return None
 
 
@@ -203,9 +223,10 @@ def privileged_features(
     phase: torch.Tensor,
     dynamics: torch.Tensor,
     push_force: torch.Tensor,
+    action_delay: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Critic extras (N, 14): ``dynamics`` (N, 5) holds the :data:`DYNAMICS` in their SI units, ``push_force``
-    (N, 3) is in N."""
+    (N, 3) is in N; with ``action_delay`` (N,) control steps, :data:`DELAY` after them (N, 15)."""
     angle = 2 * torch.pi * phase
     parts = {
         "lin_vel_trunk": quat_rotate_inverse(root_quat, root_lin_vel),
@@ -215,4 +236,6 @@ def privileged_features(
         "push_force": push_force,
     }
     parts |= {f.name: dynamics[:, i : i + 1] for i, f in enumerate(DYNAMICS)}
-    return _assemble(PRIVILEGED, parts)
+    if action_delay is None:
+        return _assemble(PRIVILEGED, parts)
+    return _assemble(PRIVILEGED + DELAY, parts | {"action_delay": action_delay.float().unsqueeze(-1)})

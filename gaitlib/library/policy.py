@@ -20,11 +20,11 @@ __all__ = ["GaitPolicy", "build_models", "per_gait"]
 OBS_GROUPS = {"actor": ["policy"], "critic": ["policy", "privileged"]}
 
 
-def _dummy_obs(actor_dim: int) -> TensorDict:
+def _dummy_obs(observation: obs_fn.ObservationConfig) -> TensorDict:
     return TensorDict(
         {
-            "policy": torch.zeros(1, actor_dim),
-            "privileged": torch.zeros(1, obs_fn.PRIVILEGED_DIM),
+            "policy": torch.zeros(1, observation.actor_dim),
+            "privileged": torch.zeros(1, observation.privileged_dim),
         },
         batch_size=[1],
     )
@@ -40,7 +40,7 @@ def build_models(
 ) -> tuple[MLPModel, MLPModel]:
     """Fresh (untrained) actor and critic of the given sizes, laid out as in :func:`rsl_rl_config`, for actor
     observations of the options ``observation``."""
-    obs = _dummy_obs(observation.actor_dim)
+    obs = _dummy_obs(observation)
     actor = MLPModel(
         obs,
         OBS_GROUPS,

@@ -13,7 +13,8 @@ The field's practice each lever follows:
   penalized per control step (legged_gym's ``penalize_contacts_on = ["thigh", "calf"]``, ``collision`` scale -1).
 - the discount: rsl-rl's locomotion tasks use 0.99 (lambda 0.95) against the paper's 0.95 (lambda 0.95), a horizon
   of about 0.7 s at 30 Hz, shorter than a fall takes to unfold.
-- the action delay: trained at a fixed number of control steps instead of Table 1's random 0-1.
+- the action delay: trained at a fixed number of control steps instead of Table 1's random 0-1, or known to the
+  critic (privileged, as mjlab's motion-tracking task gives its critic state the actor lacks).
 """
 
 from __future__ import annotations
@@ -59,6 +60,9 @@ class Recipe:
     """GAE lambda (``None``: the preset's)."""
     action_delay: int | None = None
     """Control steps every training action waits, fixed (``None``: Table 1's random 0-1)."""
+    critic_delay: bool = False
+    """The critic sees each world's action delay (privileged; the actor does not): the value of a state no longer
+    averages over delays the policy cannot observe."""
 
     def __post_init__(self) -> None:
         if self.push_kind not in PUSH_KINDS:
@@ -94,6 +98,7 @@ class Recipe:
         return dataclasses.replace(
             cfg, pushes=pushes, termination=TerminationConfig().counting(self.terminate),
             contact_penalty=self.contact_penalty, randomization=randomization,
+            observation=dataclasses.replace(cfg.observation, critic_delay=self.critic_delay),
         )
 
     def push_limit(self, preset: TrainPreset, iteration: int, iterations: int, *, control_dt: float) -> float:
