@@ -21,6 +21,7 @@ import dataclasses
 import hashlib
 import io
 import json
+import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,9 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import atomic_path
+from gaitlib.checks import GAIT_NAME, SHA256, check_content, items, number, plain, record, span, table, text
+from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
 
-__all__ = ["FORMAT", "HandoverStates", "load_states"]
+__all__ = ["FORMAT", "LIMITS", "HandoverStates", "load_states"]
 
 FORMAT = {"format": "gaitlib.handover_states", "format_version": 1}
 """Header of a handover-states file (``.npz``: the arrays, and ``meta``, a JSON string)."""
@@ -98,24 +101,117 @@ class HandoverStates:
 
 
 def load_states(path: Path) -> tuple[HandoverStates, str]:
-    """The states in ``path`` and the file's SHA-256; a one-line :class:`GaitlibError` for a missing, foreign,
-    damaged or non-finite file."""
+    """The states in ``path`` and the file's SHA-256; a one-line :class:`GaitlibError` for a missing, foreign or
+    damaged file: one whose header, gaits, identities or settings are not of the format, or whose arrays are
+    missing, of the wrong shape or type, not finite or out of their physical range (:data:`LIMITS`)."""
     path = Path(path)
     try:
         data = path.read_bytes()  # read once: the checksum is of the bytes loaded
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            names = set(npz.files)
             meta = json.loads(str(npz["meta"]))
-            arrays = {name: npz[name] for name in ARRAYS}
+            arrays = {name: npz[name] for name in ARRAYS if name in names}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # the zip's CRC-32 catches flips
         raise GaitlibError(f"{path} is not a readable handover-states file ({type(error).__name__})") from None
     if not isinstance(meta, dict) or {k: meta.get(k) for k in FORMAT} != FORMAT:
         raise GaitlibError(f"{path} is not a gaitlib handover-states file of format version 1")
-    count = len(arrays["source"])
-    gaits = tuple(meta.get("gaits", ()))
-    if count == 0 or any(len(a) != count for a in arrays.values()):
-        raise GaitlibError(f"{path} is damaged: its arrays hold different numbers of states (or none)")
-    source = arrays["source"]
-    if not all(np.isfinite(a).all() for a in arrays.values()) or source.min() < 0 or source.max() >= len(gaits):
-        raise GaitlibError(f"{path} is damaged: a state is not finite, or names a gait the file does not list")
+    damaged = f"{path} is damaged: "
+    for name in ARRAYS:
+        if name not in arrays:
+            raise GaitlibError(f"{damaged}array {name} is missing")
+    unknown = sorted(names - set(ARRAYS) - {"meta"})
+    if unknown:
+        raise GaitlibError(f"{damaged}array {unknown[0]} is not one of a handover-states file")
+    check_content(meta, _META, error=GaitlibError, prefix=damaged)
+    gaits = tuple(meta["gaits"])
+    if set(meta["identities"]) != set(gaits):
+        raise GaitlibError(f"{damaged}identities name {', '.join(sorted(meta['identities']))}, the file's gaits are "
+                           f"{', '.join(gaits)}")
+    _check_arrays(arrays, len(gaits), damaged)
     states = HandoverStates(gaits, dict(meta["identities"]), dict(meta["settings"]), **arrays)
     return states, hashlib.sha256(data).hexdigest()
+
+
+_META = record({
+    "format": text(), "format_version": number(whole=True),
+    "gaits": items(GAIT_NAME, low=1, unique=True, ordered=True),
+    "identities": table(GAIT_NAME, SHA256, low=1),
+    "settings": record(
+        {
+            "per_gait": number(1, 1e8, whole=True), "push_max": number(0, 2000, unit="N"),
+            "num_worlds": number(1, 65536, whole=True), "warmup_s": number(0, 600, unit="s"),
+            "spacing_s": number(0, 600, low_open=True, unit="s"), "backend": text(("mujoco", "newton")),
+            "seed": number(0, 2**32 - 1, whole=True),
+        },
+        {"push_interval_s": span(0, 600, unit="s"), "recorded": text()},
+        extra=plain(),
+    ),
+})
+"""The schema of a handover-states file's ``meta`` (:class:`HandoverStates`, :class:`~gaitlib.transitions.states.
+StatesConfig`); ``source`` indexes ``gaits``, which are in canonical (sorted) order."""
+
+_JOINTS = next(f.width for f in obs_fn.FRAME if f.name == "joint_pos")
+"""J: joints of the robot the frames describe (the A1's 12)."""
+
+QUAT_TOLERANCE = 1e-3
+"""How far the norm of a stored ``root_quat`` may be from 1 (float32 rounding is about 1e-7)."""
+
+LIMITS = {
+    "phase": (0.0, 1.0, "cycles"),
+    "root_quat": (-1.0 - QUAT_TOLERANCE, 1.0 + QUAT_TOLERANCE, ""),
+    "root_height": (0.0, 2.0, "m"),
+    "root_lin_vel": (-100.0, 100.0, "m/s"),
+    "root_ang_vel": (-1000.0, 1000.0, "rad/s"),
+    "joint_pos": (-2 * math.pi, 2 * math.pi, "rad"),
+    "joint_vel": (-1000.0, 1000.0, "rad/s"),
+    "history": (-1000.0, 1000.0, "(observation units)"),
+    "last_reading": (-1000.0, 1000.0, "(observation units)"),
+    "action": (-100.0, 100.0, "action units"),
+    "targets": (-2 * math.pi, 2 * math.pi, "rad"),
+}
+"""Array -> (lowest, highest, unit) of each of its values: a physical range (a trunk between the ground and 2 m, a
+joint within a turn either way) or a sanity bound far beyond what a robot that runs reaches. A root height of 0 is
+refused too (the trunk is above the ground), and ``root_quat`` must be a unit quaternion within
+:data:`QUAT_TOLERANCE`."""
+
+MAX_DELAY_LINE = 32
+"""Most PD targets a state may carry in ``targets`` (the delay line: the trained action delay plus one)."""
+
+
+def _check_arrays(arrays: dict[str, np.ndarray], num_gaits: int, damaged: str) -> None:
+    """Shapes, types, finiteness and ranges of the per-state arrays (``damaged`` opens each one-line refusal)."""
+    source = arrays["source"]
+    if source.ndim != 1 or len(source) == 0 or source.dtype.kind not in "iu":
+        raise GaitlibError(f"{damaged}source must be a list of gait indices (integers), got {source.dtype} of "
+                           f"shape {source.shape}")
+    count, targets = len(source), arrays["targets"]
+    if targets.ndim != 3 or not 1 <= targets.shape[1] <= MAX_DELAY_LINE:
+        raise GaitlibError(f"{damaged}targets must have shape (S, D, J) with D in [1, {MAX_DELAY_LINE}], got "
+                           f"{targets.shape}")
+    shapes = {
+        "phase": (), "root_height": (), "root_quat": (4,), "root_lin_vel": (3,), "root_ang_vel": (3,),
+        "joint_pos": (_JOINTS,), "joint_vel": (_JOINTS,), "history": (obs_fn.HISTORY, obs_fn.FRAME_DIM),
+        "last_reading": (obs_fn.FRAME_DIM,), "action": (_JOINTS,), "targets": (targets.shape[1], _JOINTS),
+    }
+    for name, trailing in shapes.items():
+        values = arrays[name]
+        if values.shape != (count, *trailing):
+            raise GaitlibError(f"{damaged}{name} must have shape {(count, *trailing)} ({count} states, "
+                               f"{_JOINTS} joints, frames of {obs_fn.FRAME_DIM}), got {values.shape}")
+        if values.dtype.kind != "f":
+            raise GaitlibError(f"{damaged}{name} must hold floating-point numbers, got {values.dtype}")
+        low, high, unit = LIMITS[name]
+        finite = np.isfinite(values)
+        inside = finite & (values >= low) & (values <= high) & ((values > 0) if name == "root_height" else True)
+        if not inside.all():
+            state = int(np.argwhere(~inside)[0][0])
+            what = "is not finite" if not finite[state].all() else f"lies outside [{low:g}, {high:g}] {unit}"
+            raise GaitlibError(f"{damaged}{name} of state {state} {what}")
+    norms = np.linalg.norm(arrays["root_quat"].astype(np.float64), axis=1)
+    off = np.flatnonzero(np.abs(norms - 1) > QUAT_TOLERANCE)
+    if len(off):
+        raise GaitlibError(f"{damaged}root_quat of state {off[0]} is not a unit quaternion (norm {norms[off[0]]:.6g})")
+    wrong = np.flatnonzero((source < 0) | (source >= num_gaits))
+    if len(wrong):
+        raise GaitlibError(f"{damaged}source of state {wrong[0]} is gait index {source[wrong[0]]}, the file lists "
+                           f"{num_gaits} gaits")
