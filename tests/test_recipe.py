@@ -112,3 +112,25 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
 def test_an_impossible_lever_is_one_line(fields, line) -> None:
     with pytest.raises(GaitlibError, match=line.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")):
         Recipe(**fields)
+
+
+def test_switching_in_from_recorded_states_counts_falls_and_touches(tmp_path) -> None:
+    """The stand takes over robots recorded while the trot ran, at random moments: every handed-over world is
+    judged once; a source the states do not hold is one line."""
+    from gaitlib.benchmark.switch_in import switch_in
+    from gaitlib.envs.handover import load_states
+    from gaitlib.library.layout import shipped_library_dir
+
+    recorded = gaitlib_quick("states", "--gaits", "trot,stand", "--per-gait", "16", "--worlds", "8", "--backend",
+                             "mujoco", "--out", str(tmp_path / "s.npz"))
+    assert recorded.returncode == 0, recorded.stderr
+    states, _ = load_states(tmp_path / "s.npz")
+    library = Library(shipped_library_dir())
+    stand = library.entry("stand")
+    env_cfg = library.shared_policy_settings(["stand"]).env_config(EnvConfig())
+    result = switch_in(stand.policy, stand.clip, env_cfg=env_cfg, states=states, source="trot", episodes=12,
+                       horizon_s=1.0, backend="mujoco", seed=3)
+    assert result.episodes == 12 and 0 <= result.falls <= 12 and 0 <= result.touches <= 12
+    assert result.fall_ci95[0] <= result.falls / 12 <= result.fall_ci95[1] and result.falls_definition == "trunk"
+    with pytest.raises(GaitlibError, match="the states hold none recorded while 'walk' ran"):
+        switch_in(stand.policy, stand.clip, env_cfg=env_cfg, states=states, source="walk", episodes=2)

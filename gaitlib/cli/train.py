@@ -259,6 +259,8 @@ def eval_command(
         None, "--action-delay", help="Control steps (33 ms) every action waits (default: training's random delay);",
         bounds=DELAY_STEPS,
     ),
+    late: int = bounded(0, "--late", help="Every action this many control steps later than trained (the delay's "
+                        "range shifted);", bounds=Bounds(low=0, high=3, whole=True)),
     impulses: str | None = typer.Option(
         None, "--impulses",
         help="Instead: one push per episode of each impulse, N s, START:STOP:STEP or a list (e.g. 0:30:3), in [0, "
@@ -310,13 +312,15 @@ def eval_command(
         backend=backend,
         push_max=push_max,
         action_delay_steps=action_delay,
+        late_steps=late,
         falls=falls,
         seed=seed,
     )
     if record:
         command = (f"gaitlib eval {gait} --episodes {episodes} --seconds {seconds:g} --push-max {push_max:g} --seed "
                    f"{seed} --backend {backend} --falls {falls}"
-                   + ("" if action_delay is None else f" --action-delay {action_delay}"))
+                   + ("" if action_delay is None else f" --action-delay {action_delay}")
+                   + (f" --late {late}" if late else ""))
         from gaitlib.library.target import library_writer
 
         with library_writer(lib.root, command="gaitlib eval --record"):
@@ -326,7 +330,8 @@ def eval_command(
         return
     print_measures(
         f"eval {gait}: {episodes} episodes x {seconds:g} s, Table 1 randomization, pushes <= {push_max:g} N, action "
-        + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)"),
+        + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)")
+        + (f", {late} step(s) late" if late else ""),
         [
             (f"falls ({result.falls} definition)", _rate(result.fall_rate, result.fall_ci95)),
             ("leg touches (episodes with a non-foot body on the ground)", _rate(result.touch_rate, result.touch_ci95)),

@@ -62,6 +62,8 @@ class EvalResult:
     """Largest random push, N (0: no pushes)."""
     action_delay_steps: int | None
     """Control steps every action waited (``None``: the randomized delay of training)."""
+    late_steps: int
+    """Control steps every action waited beyond that (the trained range shifted; 0: as trained)."""
     falls: str
     """The definition of a fall counted (:data:`~gaitlib.envs.terminations.FALL_DEFINITIONS`): ``trunk`` (the
     field's) or ``contact`` (a non-foot body on the ground is a fall too)."""
@@ -85,6 +87,7 @@ def evaluate_policy(
     backend: str = "auto",
     push_max: float = 0.0,
     action_delay_steps: int | None = None,
+    late_steps: int = 0,
     falls: str = DEFAULT_FALLS,
     seed: int = 0,
 ) -> EvalResult:
@@ -92,12 +95,15 @@ def evaluate_policy(
 
     ``env_cfg`` holds the policy's action and observation settings; its episode length, pushes and terminations
     are set here. ``action_delay_steps`` fixes the control steps every action waits (``None``: the randomized
-    delay of training). ``falls``: the definition of a fall counted (``trunk`` or ``contact``,
+    delay of training); ``late_steps`` delays every action that many control steps more (a step late: 1).
+    ``falls``: the definition of a fall counted (``trunk`` or ``contact``,
     :mod:`gaitlib.envs.terminations`); leg touches are counted beside it either way.
     """
     randomization = env_cfg.randomization
     if action_delay_steps is not None:
         randomization = replace(randomization, action_delay_steps=(action_delay_steps, action_delay_steps))
+    low, high = randomization.action_delay_steps
+    randomization = replace(randomization, action_delay_steps=(low + late_steps, high + late_steps))
     cfg = replace(
         env_cfg,
         episode_seconds=seconds,
@@ -133,6 +139,7 @@ def evaluate_policy(
             mean_episode_seconds=float((counted * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
+            late_steps=late_steps,
             falls=falls,
             falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
         )
