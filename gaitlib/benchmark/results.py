@@ -22,14 +22,18 @@ def group_key(strategy: str, magnitude: float) -> str:
 
 
 def load_results(out: Path) -> dict:
-    """``OUT/results.json`` (a one-line error for a foreign or unreadable file); ``{}`` when there is none."""
+    """``OUT/results.json`` (a one-line error for a foreign or unreadable file, or one not of the format: types,
+    ranges, counts, pairs, groups and strategies, :func:`~gaitlib.benchmark.validate.check_results`); ``{}`` when
+    there is none."""
+    from gaitlib.benchmark.validate import check_results
+    from gaitlib.strategies import strategy_names
+
     path = Path(out) / "results.json"
     if not path.is_file():
         return {}
     header = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION}
     results = read_json(path, header=header, what="gaitlib benchmark results", error=GaitlibError)
-    if not all(isinstance(results.get(key), dict) for key in ("settings", "library_identities", "groups")):
-        raise GaitlibError(f"{path} is damaged benchmark results (settings, identities or groups missing)")
+    check_results(results, path=path, strategies=strategy_names(), group_key=group_key)
     return results
 
 

@@ -146,20 +146,28 @@ def routes_from_results(results: dict, library: Library, *, strategy: str, push_
 
 
 def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
-    """``library``'s route table for ``gaits``; one line when it has none, or one measured on other policies or
-    switching models than the library holds now."""
+    """``library``'s route table for ``gaits``; one line when it has none, when it is not of the format (types,
+    ranges, counts, pairs, strategy and gaits: :func:`~gaitlib.benchmark.validate.check_routes`), or when it was
+    measured on other policies or switching models than the library holds now."""
+    from gaitlib.benchmark.validate import check_routes
+    from gaitlib.strategies import strategy_names
+
     path = library.switching_dir / ROUTES_FILE
     if not path.is_file():
         raise GaitlibError(f"library {library.root} has no route table; measure one: gaitlib routes --library "
                            f"{library.root}")
     saved = read_json(path, header=_FORMAT, what="a gaitlib route table", error=GaitlibError)
     again = f"; measure it again: gaitlib routes --library {library.root}"
-    if saved.get("switching") != library.switching_identity():
+    check_routes(saved, path=path, strategies=strategy_names(), again=again)
+    if saved["switching"] != library.switching_identity():
         raise GaitlibError(f"{path} was measured with other switching models than the library's{again}")
-    if set(saved.get("gaits", ())) != set(gaits) or saved.get("policies") != library.identities(gaits):
+    if set(saved["gaits"]) != set(gaits) or saved["policies"] != library.identities(gaits):
         raise GaitlibError(f"{path} was measured with other policies than the library's{again}")
-    return RouteTable(
-        gaits=tuple(saved["gaits"]), strategy=saved["strategy"], push_n=saved["push_n"], max_legs=saved["max_legs"],
-        rates={pair: (int(r[0]), int(r[1])) for pair, r in saved["rates"].items()}, policies=saved["policies"],
-        switching=saved["switching"], measured_with=saved["measured_with"],
+    table = RouteTable(
+        gaits=tuple(saved["gaits"]), strategy=saved["strategy"], push_n=float(saved["push_n"]),
+        max_legs=saved["max_legs"], rates={pair: (r[0], r[1]) for pair, r in saved["rates"].items()},
+        policies=saved["policies"], switching=saved["switching"], measured_with=saved["measured_with"],
     )
+    if "detours" in saved and saved["detours"] != {pair: list(p) for pair, p in table.detours().items()}:
+        raise GaitlibError(f"{path} is damaged: detours are not the routes its rates give{again}")
+    return table
