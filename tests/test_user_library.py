@@ -94,6 +94,27 @@ def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alon
     assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
 
 
+def test_every_writing_command_with_its_defaults_leaves_a_fresh_clone_clean(fresh_copy) -> None:
+    """The documented commands that write, with their defaults but for sizes, on a fresh clone: each writes into the
+    user's own library (made from the shipped one) or under ignored folders; ``git status`` stays empty."""
+    env = {k: v for k, v in os.environ.items() if k != "GAITLIB_LIBRARY"}
+    for command in (
+        ("eval", "stand", "--record", "--episodes", "2", "--seconds", "1"),
+        ("routes", "--samples", "1", "--worlds", "8"),
+        ("collect", "--samples", "4", "--pairs", "trot-stand", "--worlds", "4"),
+        ("map", "data/transitions.h5"),
+        ("benchmark", "--strategies", "random", "--magnitudes", "0", "--samples", "1", "--pairs", "trot-stand",
+         "--worlds", "2"),
+        ("run", "--from", "trot", "--to", "stand", "--hold", "1"),
+    ):
+        done = run(*command, cwd=fresh_copy, env=env)
+        assert done.returncode == 0, (command, done.stderr)
+    mine = Library(fresh_copy / "runs" / "library")
+    assert json.loads((mine.root / "stand" / "metadata.json").read_text())["evaluation"]["episodes"] == 2
+    assert (mine.switching_dir / "routes.json").is_file()
+    assert git("status", "--porcelain", "--untracked-files=all", cwd=fresh_copy) == ""
+
+
 def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> None:
     mine = tmp_path / "mine"
     shutil.copytree(shipped_library_dir(), mine)
