@@ -22,6 +22,7 @@ from rsl_rl.runners import OnPolicyRunner
 
 from gaitlib.atomic import atomic_path, release_lock, take_lock
 from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs.handover import HandoverStates
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.library.policy import GaitPolicy
@@ -258,9 +259,10 @@ def train_gait(
         request.library, request.description.name, preset=request.preset.name, replace=request.replace,
         copy_from=request.copy_from,
     )
+    states = handover_states(request.states, request.switch_start, gait=request.description.name)  # before any file
     ranks = Ranks.from_env()
     if not ranks.main:
-        return _train(request, ranks, on_iteration)
+        return _train(request, ranks, on_iteration, states)
     lock = request.run_dir / ".run.lock"
     fd = take_lock(lock, writing=f"training run folder {request.run_dir}", error=GaitlibError)
     try:
@@ -270,23 +272,23 @@ def train_gait(
                 f"{request.run_dir} belongs to another training run (it holds {latest}); continue that run with "
                 "--resume, or give this one its own --run-dir"
             )
-        return _train(request, ranks, on_iteration)
+        return _train(request, ranks, on_iteration, states)
     finally:
         release_lock(lock, fd)
 
 
 def _train(
-    request: TrainRequest, ranks: Ranks, on_iteration: Callable[[IterationStats], None] | None
+    request: TrainRequest, ranks: Ranks, on_iteration: Callable[[IterationStats], None] | None,
+    handover: tuple[HandoverStates | None, dict | None],
 ) -> TrainResult | None:
-    """:func:`train_gait` once its run folder is its own."""
+    """:func:`train_gait` once its run folder is its own; ``handover``: the states and their record
+    (:func:`~gaitlib.training.switch_start.handover_states`)."""
     seed = request.seed + ranks.rank
     torch.manual_seed(seed)
     preset = request.preset
     clip = clip_from_description(request.description)
     backend_name = resolve_backend_name(request.backend)
-    states, switch_start = handover_states(
-        request.states, request.switch_start, gait=request.description.name
-    )
+    states, switch_start = handover
     sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
     # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the recipe's curriculum.
     env_cfg = request.recipe.env_config(EnvConfig(episode_seconds=preset.episode_seconds), control_dt=sim.control_dt)
