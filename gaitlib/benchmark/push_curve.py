@@ -22,6 +22,7 @@ import torch
 from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.terminations import FallTally
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
@@ -103,9 +104,7 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
         angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)  # relative to the heading at the push
         force = impulse / (length * dt)
         alive = torch.ones(n, dtype=torch.bool, device=dev)
-        fell = torch.zeros(n, dtype=torch.bool, device=dev)
-        touched = torch.zeros(n, dtype=torch.bool, device=dev)
-        run, longest = torch.zeros(n, device=dev), torch.zeros(n, device=dev)
+        tally = FallTally(n, dev)
         obs = env.get_observations()
         with torch.inference_mode():
             for step in range(env.max_episode_length):
@@ -119,16 +118,12 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
                     ids = ends.nonzero().squeeze(1)
                     env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
                 obs, _, dones, extras = env.step(policy.act(obs))
-                fell |= dones & ~extras["time_outs"] & alive
-                touch = extras["touch"].to(dev) & alive
-                touched |= touch
-                run = torch.where(touch, run + 1, 0.0)
-                longest = torch.maximum(longest, run)
+                tally.step(dones, extras, alive)
                 alive &= ~dones
     finally:
         sim.close()
     sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
-    fell = fell.cpu()
+    fell, touched, longest = tally.fell.cpu(), tally.touched, tally.longest
     by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
     falls, touches = int(fell.sum()), int(touched.sum())
     return PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector, touches,

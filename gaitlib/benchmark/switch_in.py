@@ -14,7 +14,7 @@ from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import TerminationConfig
+from gaitlib.envs.terminations import FallTally, TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
@@ -75,22 +75,16 @@ def switch_in(
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
         dev, n = env.device, env.num_envs
         env.hand_over(torch.arange(n, device=dev), states.select(chosen), torch.rand(n, generator=gen))
-        alive = torch.ones(n, dtype=torch.bool, device=dev)
-        fell, touched = torch.zeros_like(alive), torch.zeros_like(alive)
-        run, longest = torch.zeros(n, device=dev), torch.zeros(n, device=dev)
+        alive, tally = torch.ones(n, dtype=torch.bool, device=dev), FallTally(n, dev)
         obs = env.get_observations()
         with torch.inference_mode():
             for _ in range(round(horizon_s / env.dt)):
                 obs, _, dones, extras = env.step(policy.act(obs))
-                touch = extras["touch"].to(dev) & alive
-                touched |= touch
-                run = torch.where(touch, run + 1, 0.0)
-                longest = torch.maximum(longest, run)
-                fell |= dones & ~extras["time_outs"] & alive
+                tally.step(dones, extras, alive)
                 alive &= ~dones
         dt = env.dt
     finally:
         sim.close()
-    down, touches = int(fell.sum()), int(touched.sum())
+    down, touches = int(tally.fell.sum()), int(tally.touched.sum())
     return SwitchIn(source, n, horizon_s, down, wilson_interval(down, n), touches, wilson_interval(touches, n),
-                    float(longest.max()) * dt, falls)
+                    float(tally.longest.max()) * dt, falls)

@@ -21,6 +21,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.rotations import quat_angle_between, quat_rotate
 
 __all__ = [
+    "FallTally",
     "TerminationConfig",
     "any_cause",
     "fall_causes",
@@ -116,3 +117,29 @@ def fallen(
     """Any termination: a non-foot body touches the ground (with ``cfg.body_contact``), the trunk touches it, the
     trunk is too low, or orientation is lost."""
     return any_cause(fall_causes(body_contact, trunk_contact, root_height, root_quat, ref_root_quat, cfg))
+
+
+class FallTally:
+    """Per world over one episode each: whether it fell, whether a non-foot body touched the ground while it was
+    up, and its longest unbroken touch; fed one environment step at a time (:meth:`step`), the worlds' ``alive``
+    mask kept by the caller and updated after each step."""
+
+    def __init__(self, num_worlds: int, device: torch.device | str) -> None:
+        self.fell = torch.zeros(num_worlds, dtype=torch.bool, device=device)
+        """(N,) ended in a fall (not a time-out)."""
+        self.touched = torch.zeros(num_worlds, dtype=torch.bool, device=device)
+        """(N,) a non-foot body touched the ground while up (the step that ends an episode included)."""
+        self._run = torch.zeros(num_worlds, device=device)
+        self.longest = torch.zeros(num_worlds, device=device)
+        """(N,) the longest unbroken touch, control steps."""
+
+    def step(self, dones: torch.Tensor, extras: dict, alive: torch.Tensor) -> torch.Tensor:
+        """Count one step of the worlds still ``alive`` before it (the environment's ``dones`` and ``extras``);
+        returns the worlds that fell at it."""
+        fell = dones & ~extras["time_outs"] & alive
+        touch = extras["touch"].to(alive.device) & alive
+        self.fell |= fell
+        self.touched |= touch
+        self._run = torch.where(touch, self._run + 1, 0.0)
+        self.longest = torch.maximum(self.longest, self._run)
+        return fell

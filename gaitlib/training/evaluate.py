@@ -9,6 +9,7 @@ import torch
 from gaitlib.defaults import DEFAULT_FALLS
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.terminations import FallTally
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
@@ -156,9 +157,9 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
     up, rad."""
     n, dev = env.num_envs, env.device
     alive = torch.ones(n, dtype=torch.bool, device=dev)
-    t = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("fell", "turned", "touched")}
-    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change",
-             "touch_run", "longest_touch")
+    t = {"turned": torch.zeros(n, dtype=torch.bool, device=dev)}
+    tally = FallTally(n, dev)
+    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
     t |= {k: torch.zeros(n, device=dev) for k in names}
     t["causes"] = {}
     start_yaw = yaw_of(env.sim_state.root_quat)
@@ -168,12 +169,7 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         s, ref = env.sim_state, env.reference.frame()
         # The rows of worlds that just finished hold their reset state: count only those still alive.
         ended = dones & alive
-        fell = ended & ~extras["time_outs"]
-        t["fell"] |= fell
-        touch = extras["touch"].to(dev) & alive  # alive until this step: the step that ends an episode counts
-        t["touched"] |= touch
-        t["touch_run"] = torch.where(touch, t["touch_run"] + 1, 0.0)
-        t["longest_touch"] = torch.maximum(t["longest_touch"], t["touch_run"])
+        fell = tally.step(dones, extras, alive)
         for name, met in extras["fall_causes"].items():
             t["causes"][name] = (t["causes"][name] | (fell & met)) if name in t["causes"] else fell & met
         alive &= ~dones
@@ -188,4 +184,4 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
         t["summed_steps"] += live
         t["alive_steps"] += live + ended.float()  # the step that ends an episode counts for its length
-    return t
+    return t | {"fell": tally.fell, "touched": tally.touched, "longest_touch": tally.longest}
