@@ -28,7 +28,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import math
 import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -36,6 +35,7 @@ from pathlib import Path
 import torch
 
 from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, read_json, write_json
+from gaitlib.checks import Invalid
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, clip_from_description
@@ -50,6 +50,7 @@ from gaitlib.library.layout import (
 )
 from gaitlib.library.policy import GaitPolicy, build_models
 from gaitlib.library.publish import recover, staged_folder
+from gaitlib.library.validate import check_action, check_deployment, check_metadata
 from gaitlib.robots import get_robot
 
 __all__ = [
@@ -333,8 +334,12 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
         raise LibraryError(
             f"library entry '{name}' was trained with another observation layout; retrain it with this gaitlib"
         )
-    _check_action(name, metadata.get("action"))
-    named = {metadata.get("gait"), (metadata.get("description") or {}).get("name")}
+    try:
+        check_action(metadata.get("action"))
+        check_metadata(metadata)
+    except Invalid as refused:
+        raise LibraryError(f"library entry '{name}' has damaged metadata: {refused} ({meta_path})") from None
+    named = {metadata["gait"], metadata["description"]["name"]}
     if named != {name}:
         raise LibraryError(
             f"library entry '{name}' holds gait {sorted(map(str, named - {name}))} by its metadata; an entry's folder "
@@ -361,30 +366,17 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
         )
         actor.load_state_dict(state["actor"])
         critic.load_state_dict(state["critic"])
-    except (KeyError, TypeError, RuntimeError, ValueError) as error:
-        raise LibraryError(f"library entry '{name}' cannot be loaded: {error}") from error
-    return LibraryEntry(
-        name=name,
-        metadata=metadata,
-        policy=GaitPolicy(actor, critic),
-        description=description,
-        clip=clip_from_description(description),
-    )
-
-
-def _check_action(name: str, action: object) -> None:
-    """The action settings every user of an entry reads: a type, and a finite positive scale (rad per action unit)
-    and clip (action units)."""
-
-    def positive(value: object) -> bool:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
-
-    if not (isinstance(action, dict) and isinstance(action.get("type"), str) and positive(action.get("scale"))
-            and positive(action.get("clip"))):
-        raise LibraryError(
-            f"library entry '{name}' has damaged metadata: 'action' needs a type and a finite positive scale and "
-            f"clip, got {json.dumps(action)}"
-        )
+        clip = clip_from_description(description)
+    except (KeyError, TypeError, RuntimeError, ValueError, GaitlibError) as error:
+        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise LibraryError(f"library entry '{name}' cannot be loaded: {first}") from error
+    entry = LibraryEntry(name=name, metadata=metadata, policy=GaitPolicy(actor, critic), description=description,
+                         clip=clip)
+    try:
+        check_deployment(metadata, entry.clip, observation, entry.action_delay_steps, onnx)
+    except Invalid as refused:
+        raise LibraryError(f"library entry '{name}' has damaged metadata: {refused} ({meta_path})") from None
+    return entry
 
 
 def _versions() -> dict[str, str]:
