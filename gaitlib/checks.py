@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 
 __all__ = [
     "GAIT_NAME",
+    "RANDOMIZATION",
     "SHA256",
     "Check",
     "Invalid",
@@ -262,3 +263,16 @@ def check_content(content: object, schema: Check, *, error: type[Exception], pre
         schema(content, "")
     except Invalid as refused:
         raise error(f"{prefix}{refused}{suffix}") from None
+
+
+RANDOMIZATION = record(
+    {
+        "enabled": flag(), "gravity_scale": span(0, 10), "action_noise": number(0), "observation_noise": number(0),
+        "mass_scale": span(0, 10), "friction": span(0, 10), "latency": span(0, 1, unit="s"),
+        "action_delay_steps": span(0, 10, whole=True), "kp": span(0, 10000), "kd": span(0, 1000),
+        "nominal_friction": number(0, 10),
+    },
+    extra=plain(),
+)
+"""The randomization settings (:class:`gaitlib.envs.randomization.RandomizationConfig`) as a library entry's
+training record and a handover-states file's settings hold them."""

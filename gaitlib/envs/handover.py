@@ -29,7 +29,19 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import atomic_path
-from gaitlib.checks import GAIT_NAME, SHA256, check_content, items, number, plain, record, span, table, text
+from gaitlib.checks import (
+    GAIT_NAME,
+    RANDOMIZATION,
+    SHA256,
+    check_content,
+    items,
+    number,
+    plain,
+    record,
+    span,
+    table,
+    text,
+)
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
 
@@ -143,7 +155,7 @@ _META = record({
             "spacing_s": number(0, 600, low_open=True, unit="s"), "backend": text(("mujoco", "newton")),
             "seed": number(0, 2**32 - 1, whole=True),
         },
-        {"push_interval_s": span(0, 600, unit="s"), "recorded": text()},
+        {"push_interval_s": span(0, 600, unit="s"), "randomization": RANDOMIZATION, "recorded": text()},
         extra=plain(),
     ),
 })
@@ -158,7 +170,7 @@ QUAT_TOLERANCE = 1e-3
 
 LIMITS = {
     "phase": (0.0, 1.0, "cycles"),
-    "root_quat": (-1.0 - QUAT_TOLERANCE, 1.0 + QUAT_TOLERANCE, ""),
+    "root_quat": (-1.0 - QUAT_TOLERANCE, 1.0 + QUAT_TOLERANCE, "(a unit quaternion's components)"),
     "root_height": (0.0, 2.0, "m"),
     "root_lin_vel": (-100.0, 100.0, "m/s"),
     "root_ang_vel": (-1000.0, 1000.0, "rad/s"),

@@ -330,10 +330,9 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
             "retrain it with this gaitlib"
         )
     observation = obs_fn.observation_config(metadata.get("observation"))
-    if observation is None:
-        raise LibraryError(
-            f"library entry '{name}' was trained with another observation layout; retrain it with this gaitlib"
-        )
+    if observation is None or json.dumps(metadata["observation"]) != json.dumps(obs_fn.layout(observation)):
+        raise LibraryError(f"library entry '{name}' was trained with another observation layout (metadata field "
+                           f"observation, {meta_path}); retrain it with this gaitlib")
     try:
         check_action(metadata.get("action"))
         check_metadata(metadata)

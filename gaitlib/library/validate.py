@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 
 from gaitlib.checks import (
     GAIT_NAME,
+    RANDOMIZATION,
     SHA256,
     Invalid,
     flag,
@@ -70,12 +71,11 @@ _PRESET = record(
     },
     extra=plain(),
 )
-_RANDOMIZATION = record(
-    {},
+_RECIPE = record(
     {
-        "enabled": flag(), "gravity_scale": span(0, 10), "action_noise": number(0), "observation_noise": number(0),
-        "mass_scale": span(0, 10), "friction": span(0, 10), "latency": span(0, 1, unit="s"),
-        "action_delay_steps": _DELAYS, "kp": span(0, 10000), "kd": span(0, 1000), "nominal_friction": number(0, 10),
+        "push_kind": text(), "kick_max": number(0), "kick_interval": span(0, 600, unit="s"), "terminate": text(),
+        "contact_penalty": number(), "gamma": number(0, 1, nullable=True), "lam": number(0, 1, nullable=True),
+        "action_delay": number(0, 10, whole=True, nullable=True), "critic_delay": flag(),
     },
     extra=plain(),
 )
@@ -94,7 +94,7 @@ _TRAINING = record(
     {},
     {
         "preset": _PRESET, "backend": text(("mujoco", "newton")), "iterations": _COUNT, "samples": _COUNT,
-        "wall_clock_s": number(0, unit="s"), "seed": _SEED, "randomization": _RANDOMIZATION,
+        "wall_clock_s": number(0, unit="s"), "seed": _SEED, "randomization": RANDOMIZATION, "recipe": _RECIPE,
         "episode_seconds": _SECONDS, "push_ramp_iterations": _COUNT,
         "curve": record({"columns": items(text(), low=1, unique=True), "rows": items(items(number(nullable=True)))}),
         "push_max_n": _PUSH_N, "push_force_max_n": _PUSH_N,
@@ -118,6 +118,7 @@ _EVALUATION = record(
         "fall_ci95": span(0, 1), "touch_rate": _RATE, "touch_ci95": span(0, 1), "longest_touch_s": number(0, unit="s"),
         "contact_agreement": _RATE, "push_max": _PUSH_N, "push_force": _PUSH_N, "falls": text(FALL_DEFINITIONS),
         "falls_by_cause": table(text(), _COUNT), "seed": _SEED, "command": text(),
+        "late_steps": number(0, 10, whole=True),
     },
     extra=plain(),
 )
@@ -140,7 +141,7 @@ def _robot(value: object, field: str) -> None:
     try:
         get_robot(value)
     except GaitlibError as error:
-        raise Invalid(field, str(error)) from None
+        raise Invalid(field, f"must be a registered robot: {error}") from None
 
 
 _METADATA = record(
@@ -181,6 +182,9 @@ def check_metadata(metadata: Mapping) -> None:
         raise Invalid("description", f"is not a gait: {error}") from None
     training, networks = metadata["training"], metadata["networks"]
     _together("training", training, TRAINING_RECORD, ("push_max_n", "push_force_max_n"))
+    for part, first in (("training", TRAINING_RECORD[0]), ("evaluation", EVALUATION_FIGURES[0][0])):
+        if metadata[part] and first not in metadata[part]:
+            raise Invalid(f"{part}.{first}", f"is missing: a {part} record is empty or holds what gaitlib records")
     preset = training.get("preset", {})
     for key in ("actor_hidden", "critic_hidden", "activation"):
         if key in preset and preset[key] != networks[key]:
