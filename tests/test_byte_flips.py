@@ -1,5 +1,6 @@
-"""benchmarks/byte_flips.py end to end at a few flips per kind of file: every kind is read back, and no flip is
-accepted with a different result or ends in a traceback (docs/failures.md has the 100-flip run)."""
+"""benchmarks/byte_flips.py end to end at a few flips and structured edits per kind of file: every kind is read back,
+and no flip or edit is accepted with a different result or ends in a traceback (docs/failures.md has the full runs:
+100 flips, 100 edits per kind)."""
 
 from __future__ import annotations
 
@@ -9,14 +10,23 @@ import sys
 from pathlib import Path
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "byte_flips.py"
+EDITED = {"route table", "handover states", "entry metadata.json", "benchmark results.json"}
+CONTROLS = {"(the keys in another order)", "(the derived detours left out)"}
+"""The edits of content that changes nothing read (a kind has one or two): the only ones that may be accepted."""
 
 
-def test_no_flipped_byte_is_used_silently() -> None:
-    done = subprocess.run([sys.executable, str(SCRIPT), "--flips", "4", "--seed", "1"], capture_output=True, text=True,
-                          timeout=600, check=False)
+def test_no_flipped_byte_or_edited_field_is_used_silently() -> None:
+    done = subprocess.run([sys.executable, str(SCRIPT), "--flips", "4", "--edits", "8", "--seed", "1"],
+                          capture_output=True, text=True, timeout=600, check=False)
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert done.returncode == 0, done.stderr
-    assert len(lines) == 12 and {line["file"].split()[0] for line in lines} >= {"entry", "switching", "transition"}
-    for line in lines:
+    flips, edits = [x for x in lines if "flips" in x], [x for x in lines if "edits" in x]
+    assert len(flips) == 12 and {line["file"].split()[0] for line in flips} >= {"entry", "switching", "transition"}
+    for line in flips:
         assert line["different"] == 0 and line["crashed"] == 0, line
         assert line["refused"] + line["same"] == 4 and line["bytes"] > 0
+    assert {line["edits"] for line in edits} == EDITED
+    for line in edits:
+        assert line["wrong"] == 0 and line["crashed"] == 0 and not line["bad_edits"], line
+        assert line["refused"] + line["harmless"] == 8 and len(line["harmless_edits"]) == line["harmless"], line
+        assert set(line["harmless_edits"]) <= CONTROLS and line["refused"] >= 6, line
