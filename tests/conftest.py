@@ -28,10 +28,29 @@ LONGEST_FILES = (
 workers in collection order, so a long file collected last keeps one core busy while the other idles."""
 
 
+NEWTON_GROUP = "newton"
+"""The pytest-xdist group of every test that runs the newton backend (``--dist loadgroup``): one worker runs them
+all, one after the other, so that Warp compiles each kernel once into its cache (about a minute and a quarter on a
+2-core machine with an empty cache) while the other workers run the rest, instead of every worker compiling the same
+kernels at the same time."""
+
+
+def _group(item: pytest.Item) -> str:
+    """An item's xdist group: :data:`NEWTON_GROUP` for the tests that run newton, else its file (``loadfile``)."""
+    callspec = getattr(item, "callspec", None)
+    newton = item.get_closest_marker("newton") is not None or (
+        callspec is not None and callspec.params.get("backend_name") == "newton"
+    )
+    return NEWTON_GROUP if newton or item.path.name == "test_gpu_check.py" else item.path.name
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Longest files first (:data:`LONGEST_FILES`), the rest in their usual order."""
-    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+    """The newton group first, then the longest files (:data:`LONGEST_FILES`), the rest in their usual order; each
+    item marked with its xdist group (:func:`_group`)."""
+    rank = {name: i + 1 for i, name in enumerate(LONGEST_FILES)}
+    for item in items:
+        item.add_marker(pytest.mark.xdist_group(_group(item)))
+    items.sort(key=lambda item: 0 if _group(item) == NEWTON_GROUP else rank.get(item.path.name, len(rank) + 1))
 
 
 @pytest.fixture(params=BACKENDS)
