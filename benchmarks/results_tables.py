@@ -3,12 +3,14 @@
     python benchmarks/results_tables.py            # rewrite the generated blocks of docs/results.md
     python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
 
-Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``pairs-0n``,
-``routes``, ``net-accuracy``). Everything between the two is made here from the evidence and nothing else, so a figure
-edited by hand, or a stored result replaced without rewriting the doc, makes ``--check`` fail
+Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``,
+``robustness-gaits``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the robustness tables are
+made in ``benchmarks/robustness_tables.py``). Everything between the two is made here from the evidence and nothing
+else, so a figure edited by hand, or a stored result replaced without rewriting the doc, makes ``--check`` fail
 (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each ``{"command": the exact
-command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, and the library's own
-``library/switching/accuracy.json``. A table whose evidence is not stored yet says "not yet measured".
+command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust recipe's ablation rows beside
+them (``docs/results/ablation/``), and the library's own ``library/switching/accuracy.json``. A table whose evidence
+is not stored yet says "not yet measured".
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ EVIDENCE = ROOT / "docs" / "results" / "library"
 """The stored raw results of the shipped library."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
-TABLES = ("quality-bar", "pairs-0n", "routes", "net-accuracy")
+TABLES = ("quality-bar", "robustness-gaits", "pairs-0n", "routes", "pushed-and-heldout", "net-accuracy")
 """The generated blocks, in the doc's order."""
 GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
 """The shipped gaits, in the order the tables list them."""
@@ -329,9 +331,14 @@ def _wrap(body: str) -> str:
 
 
 def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
-    """Every generated block's content, by name, in :data:`TABLES` order."""
-    tables = {"quality-bar": quality_bar(evidence_dir), "pairs-0n": pairs_table(evidence_dir),
-              "routes": routes_table(evidence_dir), "net-accuracy": accuracy_table(accuracy)}
+    """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
+    ``ablation`` beside ``evidence_dir``."""
+    from robustness_tables import pushed_table, robustness_table  # it is made with this module's helpers
+
+    tables = {"quality-bar": quality_bar(evidence_dir),
+              "robustness-gaits": robustness_table(Path(evidence_dir).parent / "ablation"),
+              "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
+              "pushed-and-heldout": pushed_table(evidence_dir), "net-accuracy": accuracy_table(accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 
 

@@ -3,7 +3,7 @@ figure changed by hand is caught; the tables themselves from small evidence file
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import itertools
 import json
 import shutil
@@ -20,14 +20,9 @@ SCRIPT = ROOT / "benchmarks" / "results_tables.py"
 GAITS = ("bound", "pace", "pronk", "stand", "trot", "walk")
 
 
-def _load():
-    spec = importlib.util.spec_from_file_location("results_tables", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-tables = _load()
+sys.path.insert(0, str(SCRIPT.parent))  # the benchmarks import each other by name, as when run as scripts
+tables = importlib.import_module("results_tables")
+robustness = importlib.import_module("robustness_tables")
 
 
 def _store(folder: Path, name: str, result: dict, command: str = "gaitlib made-up") -> Path:
@@ -49,11 +44,12 @@ def _cell(successes: int, samples: int = 1000) -> dict:
             "source_falls": 0, "touched": 12, "longest_touch_s": 0.1}
 
 
-def _benchmark(cells: dict[str, dict[str, dict]], *, seed: int = 0, routes: dict | None = None) -> dict:
-    """A benchmark results.json: strategy -> pair -> cell, all at 0 N."""
-    settings = {"samples": 1000, "seed": seed, "falls": "trunk"} | ({"routes": routes} if routes else {})
-    groups = {f"{s}@0": {"strategy": s, "magnitude_n": 0.0, "backend": "mujoco", "elapsed_s": 1.0, "cells": c}
-              for s, c in cells.items()}
+def _benchmark(cells: dict[str, dict[str, dict]], *, seed: int = 0, routes: dict | None = None,
+               magnitude: float = 0.0, samples: int = 1000, **settings) -> dict:
+    """A benchmark results.json: strategy -> pair -> cell, all at ``magnitude`` N."""
+    settings = {"samples": samples, "seed": seed, "falls": "trunk"} | ({"routes": routes} if routes else {}) | settings
+    groups = {f"{s}@{magnitude:g}": {"strategy": s, "magnitude_n": magnitude, "backend": "mujoco", "elapsed_s": 1.0,
+                                     "cells": c} for s, c in cells.items()}
     return {"format": "gaitlib.benchmark", "format_version": 3, "settings": settings, "library_identities": {},
             "groups": groups, "checksum": "0" * 64}
 
@@ -187,9 +183,130 @@ def test_a_doc_without_a_tables_block_is_refused(tmp_path: Path, evidence: Path)
     doc = tmp_path / "results.md"
     quality = tables.render_tables(evidence, tmp_path / "accuracy.json")["quality-bar"]
     doc.write_text(f"# Results\n\n<!-- table: quality-bar -->\n\n{quality}\n\n<!-- /table -->\n")
-    with pytest.raises(ValueError, match="pairs-0n"):
+    with pytest.raises(ValueError, match="robustness-gaits"):
         tables.write_doc(doc, evidence, tmp_path / "accuracy.json")
-    assert tables.check_doc(doc, evidence, tmp_path / "accuracy.json") == "pairs-0n"  # the first block agrees
+    assert tables.check_doc(doc, evidence, tmp_path / "accuracy.json") == "robustness-gaits"  # the first block agrees
     doc.write_text("<!-- table: quality-bar -->\n<!-- /table -->\n<!-- table: quality-bar -->\n<!-- /table -->\n")
     with pytest.raises(ValueError, match="repeated"):
         tables.check_doc(doc, evidence, tmp_path / "accuracy.json")
+
+
+def _shove(impulse: float, falls: dict[str, int], *, per_sector: int = 256, touches: int = 5) -> dict:
+    """One point of a single-shove curve (``benchmarks/robust_ablation.py``'s ``single_shove``)."""
+    episodes, total = per_sector * len(falls), sum(falls.values())
+    return {"impulse_ns": impulse, "force_n": 10 * impulse, "episodes": episodes, "falls": total,
+            "fall_rate": total / episodes, "ci95": list(wilson_interval(total, episodes)),
+            "by_sector": {s: [f, per_sector] for s, f in falls.items()}, "touches": touches,
+            "touch_ci95": list(wilson_interval(touches, episodes)), "longest_touch_s": 0.03,
+            "falls_definition": "trunk"}
+
+
+def _run(falls: int, *, push_max: float = 0.0, late: int = 0, episodes: int = 1024, touches: int = 3) -> dict:
+    """One ``gaitlib eval`` of an ablation row (its fields the table reads, and a few beside)."""
+    return {"episodes": episodes, "seconds": 20.0, "fall_rate": falls / episodes,
+            "fall_ci95": list(wilson_interval(falls, episodes)), "touch_rate": touches / episodes,
+            "touch_ci95": list(wilson_interval(touches, episodes)), "longest_touch_s": 0.03,
+            "median_heading_change_deg": 4.26, "forward_speed": 0.88, "reference_speed": 0.9, "speed_error": 0.0222,
+            "push_max": push_max, "action_delay_steps": None, "late_steps": late, "falls": "trunk"}
+
+
+def _ablation(gait: str, sources: tuple[str, str], *, shove: dict[str, int], push: int, zero: int, late: int,
+              minutes: float | None) -> dict:
+    """An ablation row shaped like ``benchmarks/robust_ablation.py``'s, 1,024 episodes a figure, 1,000 switches."""
+    quiet = dict.fromkeys(("front", "left", "back", "right"), 0)
+    figures = {"single_shove": [_shove(0.0, quiet), _shove(6.0, quiet), _shove(12.0, shove),
+                                _shove(18.0, dict.fromkeys(quiet, 5))],
+               "push_50n": _run(push, push_max=50.0), "zero_n": _run(zero), "one_step_late": _run(late, late=1)}
+    for source, falls in zip(sources, (7, 12), strict=True):
+        figures[f"switch_in_from_{source}"] = {
+            "source": source, "episodes": 1000, "horizon_s": 2.5, "falls": falls,
+            "fall_ci95": list(wilson_interval(falls, 1000)), "touches": 40,
+            "touch_ci95": list(wilson_interval(40, 1000)), "longest_touch_s": 0.07, "falls_definition": "trunk"}
+    return {"gait": gait, "library": "/x/library", "identity": "0" * 64, "recipe": "today's",
+            "training_minutes": minutes, "iterations": 1500,
+            "states": {"path": "data/states-0n.npz", "sha256": "1" * 64},
+            "settings": {"episodes": 1024, "switches": 1000, "seconds": 20.0, "impulses_ns": [0.0, 6.0, 12.0, 18.0],
+                         "backend": "mujoco", "seed": 0, "falls": "trunk"},
+            "made": "2026-12-04T10:00:00+00:00", "seconds_per_part": {}, "figures": figures}
+
+
+def _prose_fits(body: str) -> bool:
+    return all(len(line) <= tables.WIDTH for line in body.splitlines()
+               if not line.startswith("|") and "`gaitlib" not in line and "`python" not in line)
+
+
+def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence: Path) -> None:
+    folder = tmp_path / "ablation"  # beside the evidence folder, as docs/results/ablation is beside library/
+    folder.mkdir()
+    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robustness-gaits"]
+    assert _flat(made) == f"Not yet measured: `{folder / 'GAIT-today.json'}` not stored yet."
+    # the pace: 0.4% overall at 12 N s but 4 of its 256 shoves to the left (1.6%), and 2.9% one step late
+    pace = _ablation("pace", ("trot", "stand"), shove={"front": 0, "left": 4, "back": 0, "right": 0}, push=10,
+                     zero=1, late=30, minutes=83.3)
+    command = "python benchmarks/robust_ablation.py --gait pace --states data/states-0n.npz --out pace-today.json"
+    (folder / "pace-today.json").write_text(json.dumps({"command": command, "result": pace}))
+    made = _flat(robustness.robustness_table(folder))
+    assert "The pace meets 2 of the 4 bars (pushes up to 50 N, 0 N) and misses single shove: 1.6% in the left " \
+           "direction (4 of 256) at 12 N s; one step late: 2.9%." in made
+    assert f"Not yet measured: `{folder / 'trot-today.json'}` not stored yet." in made
+    assert f"`{folder / 'pace-today.json'}` (made 2026-12-04): `{command}`" in made  # the row's own date
+    # the trot: 2 of 256 in every direction at 12 N s (0.8%) meets the shove's bar; 2.9% under pushes misses its own
+    trot = _ablation("trot", ("pace", "stand"), shove=dict.fromkeys(("front", "left", "back", "right"), 2), push=30,
+                     zero=0, late=5, minutes=None)
+    (folder / "trot-today.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait trot",
+                                                         "result": trot}))
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robustness-gaits"]
+    assert _prose_fits(body) and "Not yet measured" not in body
+    made = _flat(body)
+    assert "The trot meets 3 of the 4 bars (single shove, 0 N, one step late) and misses pushes up to 50 N: 2.9%." \
+           in made
+    header = next(line for line in body.splitlines() if line.startswith("| gait | shove 6 N s [95%] | worst"))
+    assert header.endswith("| switch in from trot [95%] | switch in from stand [95%] | switch in from pace [95%] |")
+    shove = f"0.4 {_interval(4, 1024)} | left 4/256"
+    assert f"| pace | 0.0 {_interval(0, 1024)} | none | {shove} | 2.0 {_interval(20, 1024)} | front 5/256 |" in made
+    assert f"| 1.0 {_interval(10, 1024)} | 0.1 {_interval(1, 1024)} | 2.9 {_interval(30, 1024)} " \
+           f"| 0.7 {_interval(7, 1000)} | 1.2 {_interval(12, 1000)} | - |" in made  # no switch in from itself
+    assert f"| trot | 0.0 {_interval(0, 1024)} | none | 0.8 {_interval(8, 1024)} | front 2/256 |" in made
+    switches = f"4.0 {_interval(40, 1000)} | 4.0 {_interval(40, 1000)}"
+    assert f"| 0.3 {_interval(3, 1024)} | {switches} | - | 2.2% | 4.3 deg | 83.3 |" in made
+    assert f"| 0.3 {_interval(3, 1024)} | - | {switches} | 2.2% | 4.3 deg | - |" in made  # the trot's time not recorded
+    assert "1,024 episodes of 20 s a figure, 1,000 switches from each source; seed 0" in made
+
+
+def _interval(count: int, total: int) -> str:
+    low, high = wilson_interval(count, total)
+    return f"[{tables._pct(low)}, {tables._pct(high)}]"
+
+
+def test_the_pairs_pushed_and_on_another_a1_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
+    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"]
+    assert made.startswith("Not yet measured:") and "bench-50n.json" in made and "bench-menagerie-0n.json" in made
+    # at 50 N the five pairs into the stand reach 95% (390 of 400), the others 92.5%; random is not tabled
+    pushed = _benchmark({"net-lookahead": {p: _cell(390 if p.endswith("stand") else 370, 400) for p in _pairs()},
+                         "random": {p: _cell(100, 400) for p in _pairs()}}, magnitude=50.0, samples=400)
+    _store(evidence, "bench-50n", pushed, "gaitlib benchmark --strategies net-lookahead --magnitudes 50")
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"])
+    assert f"| trot → stand | **97.5** {_interval(390, 400)} | 3.0% |" in made
+    assert f"| trot → walk | 92.5 {_interval(370, 400)} | 3.0% |" in made and "| 25.0" not in made
+    assert f"| all pairs | 93.3 {_interval(11200, 12000)} | 3.0% |" in made
+    assert "| pairs at the goal or more | 5 of 30 (goal 95.0%) | |" in made
+    assert "50 N: 5 of 30 pairs reach 95.0%; `net-lookahead`, 400 transitions a cell, seed 0" in made
+    assert "Not yet measured: `" in made and "bench-menagerie-0n.json` not stored yet." in made
+    # on Menagerie's A1 every pair reaches 97% (195 of 200) but the five from the trot (90%)
+    robot = "/x/mujoco_menagerie/unitree_a1/scene.xml"
+    held = _benchmark({"net-lookahead": {p: _cell(180 if p.startswith("trot") else 195, 200) for p in _pairs()}},
+                      samples=200, robot=robot)
+    _store(evidence, "bench-menagerie-0n", held, f"gaitlib benchmark --robot {robot} --magnitudes 0 --samples 200")
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"]
+    assert _prose_fits(body) and "Not yet measured" not in body
+    made = _flat(body)
+    assert "| pair | 50 N [95%] | 50 N touches | Menagerie A1, 0 N [95%] | Menagerie A1, 0 N touches |" in made
+    assert f"| trot → pace | 92.5 {_interval(370, 400)} | 3.0% | 90.0 {_interval(180, 200)} | 6.0% |" in made
+    assert "| 5 of 30 (goal 95.0%) | | 25 of 30 (goal 97.0%) | |" in made
+    assert f"Menagerie A1, 0 N: 25 of 30 pairs reach 97.0%; `net-lookahead`, 200 transitions a cell, seed 0; falls " \
+           f"by the `trunk` definition, robot `{robot}`." in made
+    assert made.count("(made 2026-12-03)") == 2
+    _store(evidence, "bench-menagerie-0n", _benchmark({"net-lookahead": held["groups"]["net-lookahead@0"]["cells"]},
+                                                      magnitude=50.0, samples=200))
+    with pytest.raises(ValueError, match=r"bench-menagerie-0n\.json holds no net-lookahead group at 0 N"):
+        robustness.pushed_table(evidence)

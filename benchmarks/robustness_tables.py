@@ -1,0 +1,234 @@
+"""The robustness tables of docs/results.md: the gaits themselves against the robust recipe's goals, and the thirty
+switches under pushes and on another A1. ``benchmarks/results_tables.py`` writes them into the doc with the others.
+
+- ``robustness-gaits``: ``docs/results/ablation/GAIT-today.json`` for each gait of :data:`ABLATION_GAITS`, each
+  ``{"command", "result"}`` as ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``):
+  falls and leg touches with their 95% intervals, and each gait against :data:`BARS`, read from its numbers.
+- ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
+  like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
+  reach each setting's goal (:data:`BENCHMARKS`).
+
+A table whose evidence is not stored yet says "not yet measured", one file missing of several says which.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from results_tables import (
+    EVIDENCE,
+    ROOT,
+    _arrow,
+    _cite,
+    _groups_at,
+    _interval,
+    _not_yet,
+    _pct,
+    _settings_line,
+    read_evidence,
+)
+
+from gaitlib.stats import wilson_interval
+
+__all__ = [
+    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "SHOVES", "misses", "pushed_table", "read_row",
+    "robustness_table",
+]
+
+ABLATION = ROOT / "docs" / "results" / "ablation"
+"""The robust recipe's ablation rows: ``GAIT-VARIANT.json``, ``today`` the shipped gaits as trained."""
+ABLATION_GAITS = ("pace", "trot")
+"""The gaits of the ablation's baseline, in the table's order."""
+SHOVES = (6.0, 12.0, 18.0)
+"""The single shoves tabled, N s."""
+SHOVE_UP_TO_NS = 12.0
+BARS = {"single shove": 0.01, "pushes up to 50 N": 0.02, "0 N": 0.005, "one step late": 0.01}
+"""The robust recipe's goals, falls at most: a single shove of up to :data:`SHOVE_UP_TO_NS` in any direction, pushes
+up to 50 N while walking (``gaitlib eval --push-max 50``), 0 N with the trained delay, every action one step late."""
+STRATEGY = "net-lookahead"
+BENCHMARKS = (("bench-50n", 50.0, 0.95, "50 N"), ("bench-menagerie-0n", 0.0, 0.97, "Menagerie A1, 0 N"))
+"""The switching benchmarks of ``pushed-and-heldout``: evidence name, push magnitude (N), the goal a pair is
+counted against, the column's name."""
+
+
+def read_row(path: Path) -> dict | None:
+    """The ablation row stored at ``path`` as evidence (``command``, ``made``, ``result``); ``None`` when there is
+    none yet."""
+    if not path.is_file():
+        return None
+    stored = json.loads(path.read_text(encoding="utf-8"))
+    missing = sorted({"command", "result"} - set(stored))
+    if missing:
+        raise ValueError(f"{path} is not an ablation row: no {', '.join(missing)}")
+    return {"made": stored["result"]["made"][:10]} | stored
+
+
+def _rate(count: int, total: int, interval: list[float]) -> str:
+    return f"{_pct(count / total)} {_interval(*interval)}"
+
+
+def _shove_at(figures: dict, impulse: float) -> dict | None:
+    return next((p for p in figures["single_shove"] if float(p["impulse_ns"]) == impulse), None)
+
+
+def _worst(point: dict) -> tuple[str, int, int]:
+    """The direction a shove felled the largest share of, its falls and episodes."""
+    name, (falls, episodes) = max(((s, c) for s, c in point["by_sector"].items() if c[1]),
+                                  key=lambda item: (item[1][0] / item[1][1], item[1][0]))
+    return name, falls, episodes
+
+
+def _sources(figures: dict) -> list[str]:
+    return [f["source"] for k, f in figures.items() if k.startswith("switch_in_from_")]
+
+
+def _shove_miss(figures: dict) -> str | None:
+    """Why the single-shove curve misses its bar, or ``None`` when it meets it."""
+    points = [p for p in figures["single_shove"] if float(p["impulse_ns"]) <= SHOVE_UP_TO_NS]
+    if not any(float(p["impulse_ns"]) == SHOVE_UP_TO_NS for p in points):
+        return f"not measured at {SHOVE_UP_TO_NS:g} N s"
+    worst = max(((p, *_worst(p)) for p in points), key=lambda w: w[2] / w[3])
+    point, name, falls, episodes = worst
+    if falls / episodes <= BARS["single shove"]:
+        return None
+    return f"{_pct(falls / episodes)}% in the {name} direction ({falls} of {episodes}) at {point['impulse_ns']:g} N s"
+
+
+def misses(row: dict) -> dict[str, str]:
+    """Each bar of :data:`BARS` an ablation row misses, with why, from its numbers."""
+    figures = row["figures"]
+    found = {"single shove": _shove_miss(figures)}
+    for bar, key in (("pushes up to 50 N", "push_50n"), ("0 N", "zero_n"), ("one step late", "one_step_late")):
+        rate = figures[key]["fall_rate"]
+        found[bar] = f"{_pct(rate)}%" if rate > BARS[bar] else None
+    return {bar: why for bar, why in found.items() if why}
+
+
+def _falls_row(row: dict, sources: list[str]) -> str:
+    figures = row["figures"]
+    cells = []
+    for impulse in SHOVES:
+        point = _shove_at(figures, impulse)
+        if point is None:
+            cells += ["-", "-"]
+            continue
+        name, falls, episodes = _worst(point)
+        worst = f"{name} {falls}/{episodes}" if falls else "none"
+        cells += [_rate(point["falls"], point["episodes"], point["ci95"]), worst]
+    for key in ("push_50n", "zero_n", "one_step_late"):
+        cells.append(f"{_pct(figures[key]['fall_rate'])} {_interval(*figures[key]['fall_ci95'])}")
+    for source in sources:
+        switch = figures.get(f"switch_in_from_{source}")
+        cells.append(_rate(switch["falls"], switch["episodes"], switch["fall_ci95"]) if switch else "-")
+    return f"| {row['gait']} | " + " | ".join(cells) + " |"
+
+
+def _touches_row(row: dict, sources: list[str]) -> str:
+    figures = row["figures"]
+    cells = []
+    for impulse in SHOVES:
+        point = _shove_at(figures, impulse)
+        cells.append(_rate(point["touches"], point["episodes"], point["touch_ci95"]) if point else "-")
+    for key in ("push_50n", "zero_n", "one_step_late"):
+        cells.append(f"{_pct(figures[key]['touch_rate'])} {_interval(*figures[key]['touch_ci95'])}")
+    for source in sources:
+        switch = figures.get(f"switch_in_from_{source}")
+        cells.append(_rate(switch["touches"], switch["episodes"], switch["touch_ci95"]) if switch else "-")
+    zero, minutes = figures["zero_n"], row.get("training_minutes")
+    cells += [f"{_pct(zero['speed_error'])}%", f"{zero['median_heading_change_deg']:.1f} deg",
+              "-" if minutes is None else f"{minutes:g}"]
+    return f"| {row['gait']} | " + " | ".join(cells) + " |"
+
+
+def _verdict(row: dict) -> str:
+    missed = misses(row)
+    met = [bar for bar in BARS if bar not in missed]
+    text = f"The {row['gait']} meets {len(met)} of the {len(BARS)} bars"
+    text += f" ({', '.join(met)})" if met else ""
+    return text + (f" and misses {'; '.join(f'{bar}: {why}' for bar, why in missed.items())}." if missed else ".")
+
+
+def robustness_table(ablation_dir: Path = ABLATION) -> str:
+    """``robustness-gaits``: the shipped gaits' ablation rows (``GAIT-today.json``), falls then touches, and each
+    gait against :data:`BARS`."""
+    paths = {g: Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS}
+    found = {g: (p, e) for g, p in paths.items() if (e := read_row(p)) is not None}
+    if not found:
+        return _not_yet(Path(ablation_dir) / "GAIT-today.json")
+    rows = [e["result"] for _, e in found.values()]
+    sources = list(dict.fromkeys(s for r in rows for s in _sources(r["figures"])))
+    shoves = [f"shove {i:g} N s" for i in SHOVES]
+    others = ["pushes up to 50 N", "0 N", "one step late", *(f"switch in from {s}" for s in sources)]
+    falls = ["| gait | " + " | ".join(f"{s} [95%] | worst direction" for s in shoves) + " | "
+             + " | ".join(f"{o} [95%]" for o in others) + " |",
+             "|---|" + "---|---|" * len(shoves) + "---|" * len(others)]
+    touches = ["| gait | " + " | ".join(f"{c} [95%]" for c in [*shoves, *others])
+               + " | speed error (0 N) | median heading change (0 N) | training, minutes |",
+               "|---|" + "---|" * (len(shoves) + len(others) + 3)]
+    runs = sorted({f"{r['settings']['episodes']:,} episodes of {r['settings']['seconds']:g} s a figure, "
+                   f"{r['settings']['switches']:,} switches from each source; seed {r['settings']['seed']}, falls by "
+                   f"the `{r['settings']['falls']}` definition" for r in rows})
+    lines = ["Falls, % of episodes (of switches for a switch in) [95% interval]; a shove's worst direction: its falls "
+             "of its episodes:", "", *falls, *(_falls_row(r, sources) for r in rows), "",
+             "Leg touches ridden through, % [95% interval]; speed and heading at 0 N:", "", *touches,
+             *(_touches_row(r, sources) for r in rows), "",
+             f"{' / '.join(runs)}. The bars (the robust recipe's goals): falls at most "
+             f"{_pct(BARS['single shove'])}% after a single shove of up to {SHOVE_UP_TO_NS:g} N s in any direction, "
+             f"{_pct(BARS['pushes up to 50 N'])}% under pushes up to 50 N, {_pct(BARS['0 N'])}% at 0 N and "
+             f"{_pct(BARS['one step late'])}% one step late. " + " ".join(_verdict(r) for r in rows)]
+    missing = [g for g in ABLATION_GAITS if g not in found]
+    if missing:
+        lines.append(_not_yet(*(paths[g] for g in missing)))
+    return "\n".join([*lines, "", "Evidence:", "", *(f"- {_cite(p, e)}" for p, e in found.values())])
+
+
+def _cells(name: str, evidence: dict, magnitude: float) -> dict[str, dict]:
+    groups = _groups_at(evidence["result"], magnitude)
+    if STRATEGY not in groups:
+        raise ValueError(f"{name}.json holds no {STRATEGY} group at {magnitude:g} N")
+    return groups[STRATEGY]
+
+
+def _success(cell: dict | None, goal: float) -> str:
+    if cell is None:
+        return "- | -"
+    successes, samples = cell["successes"], cell["samples"]
+    rate = _pct(successes / samples)
+    bold = f"**{rate}**" if successes >= goal * samples else rate
+    return f"{bold} {_interval(*wilson_interval(successes, samples))} | {_pct(cell['touched'] / samples)}%"
+
+
+def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
+    """``pushed-and-heldout``: ``net-lookahead`` on every pair at 50 N and on MuJoCo Menagerie's A1 at 0 N, each
+    against its goal."""
+    paths = {name: Path(evidence_dir) / f"{name}.json" for name, *_ in BENCHMARKS}
+    stored = {name: read_evidence(p) for name, p in paths.items()}
+    if all(e is None for e in stored.values()):
+        return _not_yet(*paths.values())
+    found = [(stored[name], _cells(name, stored[name], magnitude), goal, title)
+             for name, magnitude, goal, title in BENCHMARKS if stored[name] is not None]
+    pairs = sorted({p for _, cells, _, _ in found for p in cells}, key=lambda p: p.split("-"))
+    lines = ["| pair | " + " | ".join(f"{title} [95%] | {title} touches" for *_, title in found) + " |",
+             "|---|" + "---|---|" * len(found)]
+    lines += [f"| {_arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
+              for p in pairs]
+    pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
+              for _, cells, _, _ in found]
+    lines.append("| all pairs | " + " | ".join(f"{_pct(s / n)} {_interval(*wilson_interval(s, n))} | {_pct(t / n)}%"
+                                                for s, n, t in pooled) + " |")
+    reached = [sum(c["successes"] >= goal * c["samples"] for c in cells.values()) for _, cells, goal, _ in found]
+    lines.append("| pairs at the goal or more | " + " | ".join(
+        f"{k} of {len(cells)} (goal {_pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
+                 + " |")
+    notes = []
+    for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
+        settings = evidence["result"]["settings"]
+        robot = f", robot `{settings['robot']}`" if settings.get("robot") else ""
+        notes.append(f"{title}: {k} of {len(cells)} pairs reach {_pct(goal)}%; `{STRATEGY}`, "
+                     f"{_settings_line(settings)}{robot}.")
+    absent = [paths[name] for name, e in stored.items() if e is None]
+    if absent:
+        notes.append(_not_yet(*absent))
+    sources = [f"- {_cite(paths[name], e)}" for name, e in stored.items() if e is not None]
+    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
