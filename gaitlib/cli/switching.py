@@ -274,7 +274,7 @@ def routes_command(
     from gaitlib.benchmark.routes import routes_from_results
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds
-    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import check_writable, copy_library, library_writer, measurement_id, writing_target
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
@@ -287,7 +287,7 @@ def routes_command(
     with library_writer(target, command="gaitlib routes"):  # no refit while the pairs are measured
         setup = load_switching(target)
         lib = setup.resources.library
-        out = out or Path("runs") / f"routes-{_measured_identity(lib)}"
+        out = out or Path("runs") / f"routes-{measurement_id(lib)}"
         config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,
                              backend=backend, seed=seed, falls=falls)
         results = _sweep_with_progress(out, setup, config)
@@ -335,16 +335,6 @@ def _route_table(setup, *, strategies, pushes, falls: str):
                       f"{'; '.join(differ)} (measure routes for it: gaitlib routes --strategy ... --push ...)",
                       soft_wrap=True)
     return table
-
-
-def _measured_identity(library) -> str:
-    """12 hex digits naming what a library's measurement depends on (its policies and switching models), for a
-    default output folder that two libraries never share."""
-    import hashlib
-    import json
-
-    key = {"policies": library.identities(), "switching": library.switching_identity()}
-    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
 
 
 def _sweep_with_progress(out: Path, setup, config, *, cluster=None) -> dict:

@@ -16,6 +16,8 @@ over what they ship: a run writes its own output, and the user chooses what to u
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import os
 import shutil
 from collections.abc import Iterator
@@ -27,7 +29,15 @@ from gaitlib.library.layout import is_shipped, shipped_library_dir
 from gaitlib.library.publish import staged_folder
 from gaitlib.library.store import Library
 
-__all__ = ["USER_LIBRARY", "WRITER_LOCK", "check_writable", "copy_library", "library_writer", "writing_target"]
+__all__ = [
+    "USER_LIBRARY",
+    "WRITER_LOCK",
+    "check_writable",
+    "copy_library",
+    "library_writer",
+    "measurement_id",
+    "writing_target",
+]
 
 USER_LIBRARY = Path("runs") / "library"
 """The user's own library, relative to the working folder: where writing commands write by default."""
@@ -81,3 +91,10 @@ def library_writer(library: Path, *, command: str) -> Iterator[None]:
         yield
     finally:
         release_lock(lock, fd)
+
+
+def measurement_id(library: Library) -> str:
+    """12 hex digits naming what a measurement of ``library`` depends on (its policies and switching models): a
+    default output folder that two libraries share only when they hold the same models."""
+    key = {"policies": library.identities(), "switching": library.switching_identity()}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
