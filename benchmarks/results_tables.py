@@ -40,7 +40,7 @@ EVIDENCE = ROOT / "docs" / "results" / "library"
 """The stored raw results of the shipped library."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
-TABLES = ("quality-bar", "robustness-gaits", "pairs-0n", "routes", "pushed-and-heldout", "net-accuracy")
+TABLES = ("quality-bar", "robustness-gaits", "shove-curves", "pairs-0n", "routes", "pushed-and-heldout", "net-accuracy")
 """The generated blocks, in the doc's order."""
 GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
 """The shipped gaits, in the order the tables list them."""
@@ -333,10 +333,11 @@ def _wrap(body: str) -> str:
 def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
     ``ablation`` beside ``evidence_dir``."""
-    from robustness_tables import pushed_table, robustness_table  # it is made with this module's helpers
+    from robustness_tables import pushed_table, robustness_table, shove_table  # made with this module's helpers
 
     tables = {"quality-bar": quality_bar(evidence_dir),
               "robustness-gaits": robustness_table(Path(evidence_dir).parent / "ablation"),
+              "shove-curves": shove_table(evidence_dir, Path(evidence_dir).parent / "ablation"),
               "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
               "pushed-and-heldout": pushed_table(evidence_dir), "net-accuracy": accuracy_table(accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}

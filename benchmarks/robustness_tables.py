@@ -33,7 +33,7 @@ from gaitlib.stats import wilson_interval
 
 __all__ = [
     "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "SHOVES", "misses", "pushed_table", "read_row",
-    "robustness_table",
+    "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
@@ -232,3 +232,54 @@ def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
         notes.append(_not_yet(*absent))
     sources = [f"- {_cite(paths[name], e)}" for name, e in stored.items() if e is not None]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
+
+
+def _curve(evidence_dir: Path, ablation_dir: Path, gait: str) -> tuple[list[dict], Path, dict] | None:
+    """A gait's single-shove curve: its points, the evidence file and its record; from the gait's ablation row if
+    there is one, else from ``shove-GAIT.json`` (``gaitlib eval GAIT --impulses ... --json``)."""
+    row_path = Path(ablation_dir) / f"{gait}-today.json"
+    row = read_row(row_path)
+    if row is not None:
+        return row["result"]["figures"]["single_shove"], row_path, row
+    path = Path(evidence_dir) / f"shove-{gait}.json"
+    evidence = read_evidence(path)
+    return None if evidence is None else (evidence["result"]["points"], path, evidence)
+
+
+def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) -> str:
+    """Every gait's falls under one shove of each impulse, with its interval, the worst direction at the bar's
+    impulse and the touches there."""
+    from results_tables import GAITS
+
+    curves = {g: c for g in GAITS if (c := _curve(evidence_dir, ablation_dir, g)) is not None}
+    absent = [Path(evidence_dir) / f"shove-{g}.json" for g in GAITS if g not in curves]
+    if not curves:
+        return _not_yet(*absent)
+    impulses = sorted({float(p["impulse_ns"]) for points, _, _ in curves.values() for p in points})
+    bar = f"{SHOVE_UP_TO_NS:g} N s"
+    lines = ["| gait | " + " | ".join(f"{i:g} N s [95%]" for i in impulses)
+             + f" | worst direction at {bar} | touches at {bar} [95%] | at most {_pct(BARS['single shove'])}% up to "
+             f"{bar}, every direction |", "|---|" + "---|" * (len(impulses) + 3)]
+    for gait, (points, _, _) in curves.items():
+        at = {float(p["impulse_ns"]): p for p in points}
+        cells = [_rate(at[i]["falls"], at[i]["episodes"], at[i]["ci95"]) if i in at else "-" for i in impulses]
+        point = at.get(SHOVE_UP_TO_NS)
+        if point is None:
+            worst, touches = "-", "-"
+        else:
+            name, falls, episodes = _worst(point)
+            worst = f"{name} {falls}/{episodes}" if falls else "none"
+            touches = _rate(point["touches"], point["episodes"], point["touch_ci95"])
+        miss = _shove_miss({"single_shove": points})
+        verdict = f"no: {miss}" if miss else "yes"
+        lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
+    met = [g for g, (points, _, _) in curves.items() if _shove_miss({"single_shove": points}) is None]
+    sources = "\n".join(f"- {_cite(path, record)}" for _, path, record in curves.values())
+    episodes = sorted({p["episodes"] for points, _, _ in curves.values() for p in points})
+    sizes = ", ".join(f"{e:,}" for e in episodes)
+    notes = [f"One 0.1 s push per episode at a random phase and direction, {sizes} episodes a "
+             f"point, falls by the `trunk` definition. {len(met)} of {len(curves)} gaits meet the bar"
+             + (f" ({', '.join(met)})." if met else ".")]
+    if absent:
+        notes.append(_not_yet(*absent))
+    return "\n".join([*lines, "", *notes, "", "Evidence:", "", sources])

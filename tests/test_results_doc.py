@@ -310,3 +310,27 @@ def test_the_pairs_pushed_and_on_another_a1_from_small_evidence(tmp_path: Path, 
                                                       magnitude=50.0, samples=200))
     with pytest.raises(ValueError, match=r"bench-menagerie-0n\.json holds no net-lookahead group at 0 N"):
         robustness.pushed_table(evidence)
+
+
+def test_every_gaits_single_shove_curve_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
+    """The curves table takes a gait's curve from its ablation row when there is one, else from its stored
+    ``gaitlib eval --impulses`` result, and reads the verdict against the bar from the worst direction."""
+    folder = tmp_path / "ablation"
+    folder.mkdir()
+    quiet = dict.fromkeys(("front", "left", "back", "right"), 0)
+    pace = _ablation("pace", ("trot", "stand"), shove={"front": 0, "left": 4, "back": 0, "right": 0}, push=10,
+                     zero=1, late=30, minutes=83.3)
+    (folder / "pace-today.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
+                                                        "result": pace}))
+    walk = {"gait": "walk", "points": [_shove(0.0, quiet), _shove(12.0, dict.fromkeys(quiet, 1))]}
+    command = "gaitlib eval walk --impulses 0,12 --episodes 1024 --json"
+    (evidence / "shove-walk.json").write_text(json.dumps({"command": command, "made": "2026-12-05", "result": walk}))
+    body = robustness.shove_table(evidence, folder)
+    made = _flat(body)
+    assert made.index("| pace |") < made.index("| walk |")  # the library's order
+    assert f"| walk | 0.0 {_interval(0, 1024)} | - | 0.4 {_interval(4, 1024)} | - | front 1/256 |" in made
+    assert "| yes |" in made and "| no: 1.6% in the left direction (4 of 256) at 12 N s |" in made
+    assert "1 of 2 gaits meet the bar (walk)." in made
+    assert f"`{evidence / 'shove-walk.json'}` (made 2026-12-05): `{command}`" in made
+    for gait in ("trot", "stand", "bound", "pronk"):
+        assert f"`{evidence / f'shove-{gait}.json'}`" in made  # not yet measured, named
