@@ -4,8 +4,8 @@
     python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``,
-``robustness-gaits``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the robustness tables are
-made in ``benchmarks/robustness_tables.py``). Everything between the two is made here from the evidence and nothing
+``robustness-gaits``, ``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the
+robustness tables are made in ``benchmarks/robustness_tables.py``, what both share is ``benchmarks/evidence.py``). Everything between the two is made here from the evidence and nothing
 else, so a figure edited by hand, or a stored result replaced without rewriting the doc, makes ``--check`` fail
 (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each ``{"command": the exact
 command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust recipe's ablation rows beside
@@ -22,8 +22,23 @@ import re
 import sys
 import textwrap
 from collections.abc import Sequence
-from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
+
+from evidence import (
+    EVIDENCE,
+    GAITS,
+    ROOT,
+    arrow,
+    cite,
+    groups_at,
+    interval,
+    not_yet,
+    pct,
+    read_evidence,
+    settings_line,
+    shown,
+)
+from robustness_tables import pushed_table, robustness_table, shove_table
 
 from gaitlib.atomic import atomic_path
 from gaitlib.stats import wilson_interval
@@ -33,19 +48,12 @@ __all__ = [
     "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table", "write_doc",
 ]
 
-ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
 """The doc whose generated blocks these tables are."""
-EVIDENCE = ROOT / "docs" / "results" / "library"
-"""The stored raw results of the shipped library."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
 TABLES = ("quality-bar", "robustness-gaits", "shove-curves", "pairs-0n", "routes", "pushed-and-heldout", "net-accuracy")
 """The generated blocks, in the doc's order."""
-GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
-"""The shipped gaits, in the order the tables list them."""
-STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
-"""Column order of the strategies in a switching table."""
 BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
 """The quality bar: falls in at most 1% of episodes, speed within 10% of the reference, median heading change at
 most 15 degrees."""
@@ -60,53 +68,15 @@ WIDTH = 120
 """The doc's line length: the tables' prose is wrapped to it (a table row or an inline code span is never broken)."""
 
 
-def read_evidence(path: Path) -> dict | None:
-    """The evidence stored at ``path`` (``command``, ``made``, ``result``); ``None`` when there is none yet."""
-    if not path.is_file():
-        return None
-    evidence = json.loads(path.read_text(encoding="utf-8"))
-    missing = sorted({"command", "made", "result"} - set(evidence))
-    if missing:
-        raise ValueError(f"{path} is not an evidence file: no {', '.join(missing)}")
-    return evidence
-
-
-def _shown(path: Path) -> str:
-    """``path`` as the doc names it: from the repository root when under it."""
-    path = Path(path).resolve()
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
-
-
-def _cite(path: Path, evidence: dict) -> str:
-    return f"`{_shown(path)}` (made {evidence['made']}): `{evidence['command']}`"
-
-
-def _not_yet(*paths: Path) -> str:
-    return "Not yet measured: " + ", ".join(f"`{_shown(p)}`" for p in paths) + " not stored yet."
-
-
-def _pct(rate: float) -> str:
-    """A rate as a percentage to a tenth, halves rounded up as written (the paper's 0.8915 is 89.2, not 89.1)."""
-    return str((Decimal(str(rate)) * 100).quantize(Decimal("0.1"), rounding=ROUND_HALF_UP))
-
-
-def _interval(low: float, high: float) -> str:
-    return f"[{_pct(low)}, {_pct(high)}]"
-
-
 def _success(successes: int, samples: int) -> str:
     """A success rate with its Wilson 95% interval, bold when it reaches :data:`GOAL`."""
     rate = successes / samples
-    text = _pct(rate)
-    return f"{f'**{text}**' if rate >= GOAL else text} {_interval(*wilson_interval(successes, samples))}"
+    text = pct(rate)
+    return f"{f'**{text}**' if rate >= GOAL else text} {interval(*wilson_interval(successes, samples))}"
 
 
 def _speed(value: float) -> str:
     return f"{abs(value) if round(value, 2) == 0 else value:.2f}"
-
-
-def _arrow(pair: str) -> str:
-    return pair.replace("-", " → ")
 
 
 def _gait_order(name: str) -> tuple[int, str]:
@@ -117,9 +87,9 @@ def _misses(r: dict) -> list[str]:
     """What of the quality bar an evaluation misses, from its numbers."""
     misses = []
     if r["fall_rate"] > BAR_FALLS:
-        misses.append(f"falls {_pct(r['fall_rate'])}% over {_pct(BAR_FALLS)}%")
+        misses.append(f"falls {pct(r['fall_rate'])}% over {pct(BAR_FALLS)}%")
     if r["speed_error"] > BAR_SPEED:
-        misses.append(f"speed error {_pct(r['speed_error'])}% over {_pct(BAR_SPEED)}%")
+        misses.append(f"speed error {pct(r['speed_error'])}% over {pct(BAR_SPEED)}%")
     if r["median_heading_change_deg"] > BAR_HEADING_DEG:
         misses.append(f"median heading change {r['median_heading_change_deg']:.1f} deg over {BAR_HEADING_DEG:g}")
     return misses
@@ -129,10 +99,10 @@ def _quality_row(r: dict) -> str:
     episodes = r["episodes"]
     falls, touches = round(r["fall_rate"] * episodes), round(r["touch_rate"] * episodes)
     still = abs(r["reference_speed"]) < 1e-6  # the evaluation's speed error is then the drift in m/s
-    error = f"{r['speed_error']:.3f} m/s drift" if still else f"{_pct(r['speed_error'])}%"
+    error = f"{r['speed_error']:.3f} m/s drift" if still else f"{pct(r['speed_error'])}%"
     misses = _misses(r)
-    return (f"| {r['gait']} | {_pct(r['fall_rate'])}% ({falls} of {episodes}) {_interval(*r['fall_ci95'])} "
-            f"| {_pct(r['touch_rate'])}% ({touches}) {_interval(*r['touch_ci95'])} | {r['longest_touch_s']:.2f} s "
+    return (f"| {r['gait']} | {pct(r['fall_rate'])}% ({falls} of {episodes}) {interval(*r['fall_ci95'])} "
+            f"| {pct(r['touch_rate'])}% ({touches}) {interval(*r['touch_ci95'])} | {r['longest_touch_s']:.2f} s "
             f"| {_speed(r['forward_speed'])} ({_speed(r['reference_speed'])}) | {error} "
             f"| {r['median_heading_change_deg']:.1f} deg | {'no: ' + '; '.join(misses) if misses else 'yes'} |")
 
@@ -142,10 +112,10 @@ def _eval_sources(found: dict[str, tuple[Path, dict]]) -> str:
     templates = {e["command"].replace(f"eval {g} ", "eval GAIT ") for g, (_, e) in found.items()}
     dates = {e["made"] for _, e in found.values()}
     if len(templates) == 1 and len(dates) == 1:
-        folder = _shown(next(iter(found.values()))[0].parent)
+        folder = shown(next(iter(found.values()))[0].parent)
         return (f"Evidence: `{folder}/eval-GAIT.json` for GAIT in {', '.join(found)} (made {dates.pop()}), each the "
                 f"output of `{templates.pop()}`.")
-    return "Evidence:\n\n" + "\n".join(f"- {_cite(p, e)}" for p, e in found.values())
+    return "Evidence:\n\n" + "\n".join(f"- {cite(p, e)}" for p, e in found.values())
 
 
 def quality_bar(evidence_dir: Path = EVIDENCE) -> str:
@@ -153,7 +123,7 @@ def quality_bar(evidence_dir: Path = EVIDENCE) -> str:
     paths = sorted(Path(evidence_dir).glob("eval-*.json"), key=lambda p: _gait_order(p.stem.removeprefix("eval-")))
     found = {p.stem.removeprefix("eval-"): (p, read_evidence(p)) for p in paths}
     if not found:
-        return _not_yet(Path(evidence_dir) / "eval-GAIT.json")
+        return not_yet(Path(evidence_dir) / "eval-GAIT.json")
     results = [e["result"] for _, e in found.values()]
     lines = ["| gait | falls [95%] | leg touches [95%] | longest touch | speed (reference), m/s | speed error "
              "| median heading change | meets the bar |", "|---|---|---|---|---|---|---|---|"]
@@ -170,45 +140,32 @@ def quality_bar(evidence_dir: Path = EVIDENCE) -> str:
     return "\n".join([*lines, "", _eval_sources(found)])
 
 
-def _groups_at(result: dict, magnitude: float) -> dict[str, dict]:
-    """strategy -> its cells (pair -> counts) at ``magnitude`` N, strategies in :data:`STRATEGIES` order."""
-    groups = {g["strategy"]: g["cells"] for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude}
-    order = {s: i for i, s in enumerate(STRATEGIES)}
-    return dict(sorted(groups.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
-
-
-def _settings_line(settings: dict) -> str:
-    """What a benchmark's cells are: size, seed and the definition of a fall."""
-    return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
-           "definition"
-
-
 def pairs_table(evidence_dir: Path = EVIDENCE) -> str:
     """Table (b): every ordered pair at 0 N, each strategy's success with its interval and its touches."""
     path = Path(evidence_dir) / "bench-0n.json"
     evidence = read_evidence(path)
     if evidence is None:
-        return _not_yet(path)
-    groups = _groups_at(evidence["result"], 0.0)
+        return not_yet(path)
+    groups = groups_at(evidence["result"], 0.0)
     pairs = sorted({p for cells in groups.values() for p in cells}, key=lambda p: p.split("-"))
     lines = ["| pair | " + " | ".join(f"{s} [95%] | {s} touches" for s in groups) + " |",
              "|---|" + "---|---|" * len(groups)]
     for pair in pairs:
         cells = [groups[s].get(pair) for s in groups]
-        lines.append(f"| {_arrow(pair)} | " + " | ".join(
-            f"{_success(c['successes'], c['samples'])} | {_pct(c['touched'] / c['samples'])}%" if c else "- | -"
+        lines.append(f"| {arrow(pair)} | " + " | ".join(
+            f"{_success(c['successes'], c['samples'])} | {pct(c['touched'] / c['samples'])}%" if c else "- | -"
             for c in cells) + " |")
     pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
               for cells in groups.values()]
-    lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{_pct(s / n)} | {_pct(t / n)}%" for s, n, t in pooled)
+    lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{pct(s / n)} | {pct(t / n)}%" for s, n, t in pooled)
                  + " |")
     reached = [sum(c["successes"] >= GOAL * c["samples"] for c in cells.values()) for cells in groups.values()]
     counts = [f"{k} of {len(cells)} | " for k, cells in zip(reached, groups.values(), strict=True)]
-    lines.append(f"| pairs at {_pct(GOAL)}% or more | " + " | ".join(counts) + " |")
+    lines.append(f"| pairs at {pct(GOAL)}% or more | " + " | ".join(counts) + " |")
     summary = ", ".join(f"`{s}` {k} of {len(c)}" for (s, c), k in zip(groups.items(), reached, strict=True))
-    return "\n".join([*lines, "", f"Pairs at {_pct(GOAL)}% or more: {summary}. "
-                      f"{_settings_line(evidence['result']['settings'])}; a touch: a non-foot body on the ground from "
-                      "the request to the verdict, ridden through.", "", f"Evidence: {_cite(path, evidence)}"])
+    return "\n".join([*lines, "", f"Pairs at {pct(GOAL)}% or more: {summary}. "
+                      f"{settings_line(evidence['result']['settings'])}; a touch: a non-foot body on the ground from "
+                      "the request to the verdict, ridden through.", "", f"Evidence: {cite(path, evidence)}"])
 
 
 def _route(pair: str, routed: dict, table: dict | None) -> list[str]:
@@ -229,7 +186,7 @@ def _predicted(route: list[str], table: dict | None) -> str:
     for leg in legs:
         successes, samples = rates[leg]
         product *= successes / samples
-    return _pct(product)
+    return pct(product)
 
 
 def routes_table(evidence_dir: Path = EVIDENCE) -> str:
@@ -238,10 +195,10 @@ def routes_table(evidence_dir: Path = EVIDENCE) -> str:
     found = {name: read_evidence(p) for name, p in paths.items()}
     direct, routed, table = found["bench-direct"], found["bench-routed"], found["routes"]
     if direct is None or routed is None:
-        return _not_yet(*(paths[n] for n in ("bench-direct", "bench-routed") if found[n] is None))
+        return not_yet(*(paths[n] for n in ("bench-direct", "bench-routed") if found[n] is None))
     common = sorted(direct["result"]["groups"].keys() & routed["result"]["groups"].keys())
     if not common:
-        raise ValueError(f"{_shown(paths['bench-direct'])} and {_shown(paths['bench-routed'])} share no group")
+        raise ValueError(f"{shown(paths['bench-direct'])} and {shown(paths['bench-routed'])} share no group")
     key = common[0]
     cells, routed_cells = direct["result"]["groups"][key]["cells"], routed["result"]["groups"][key]["cells"]
     pairs = sorted(cells.keys() & routed_cells.keys(), key=lambda p: p.split("-"))
@@ -251,21 +208,21 @@ def routes_table(evidence_dir: Path = EVIDENCE) -> str:
     for pair in pairs:
         route = _route(pair, routed, table)
         through = ", ".join(route[1:-1]) or "-"
-        rate = _pct(table_rates[pair][0] / table_rates[pair][1]) if pair in table_rates else "-"
+        rate = pct(table_rates[pair][0] / table_rates[pair][1]) if pair in table_rates else "-"
         d, r = cells[pair], routed_cells[pair]
-        lines.append(f"| {_arrow(pair)} | {through} | {rate} | {_predicted(route, table)} "
+        lines.append(f"| {arrow(pair)} | {through} | {rate} | {_predicted(route, table)} "
                      f"| {_success(d['successes'], d['samples'])} | {_success(r['successes'], r['samples'])} |")
     reached = [sum(c[p]["successes"] >= GOAL * c[p]["samples"] for p in pairs) for c in (cells, routed_cells)]
-    lines.append(f"| at {_pct(GOAL)}% or more | | | | {reached[0]} of {len(pairs)} | {reached[1]} of {len(pairs)} |")
+    lines.append(f"| at {pct(GOAL)}% or more | | | | {reached[0]} of {len(pairs)} | {reached[1]} of {len(pairs)} |")
     strategy, magnitude = key.split("@")
-    notes = [f"Routed, {reached[1]} of {len(pairs)} pairs reach {_pct(GOAL)}%; directly, {reached[0]}. Both "
-             f"benchmarks: `{strategy}` at {magnitude} N, {_settings_line(routed['result']['settings'])}."]
+    notes = [f"Routed, {reached[1]} of {len(pairs)} pairs reach {pct(GOAL)}%; directly, {reached[0]}. Both "
+             f"benchmarks: `{strategy}` at {magnitude} N, {settings_line(routed['result']['settings'])}."]
     if table is not None:
         measured = table["result"].get("measured_with", {})
         notes.append(f"The route table's rates, and its predictions (the product of the legs' rates): "
                      f"`{table['result'].get('strategy', '?')}`, {measured.get('samples', 0):,} transitions a pair, "
                      f"seed {measured.get('seed', '?')}, falls by the `{measured.get('falls', '?')}` definition.")
-    sources = [f"- {_cite(paths[n], found[n])}" for n in ("bench-direct", "bench-routed", "routes") if found[n]]
+    sources = [f"- {cite(paths[n], found[n])}" for n in ("bench-direct", "bench-routed", "routes") if found[n]]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
 
 
@@ -275,18 +232,18 @@ def _mean(values: Sequence[float | None]) -> float | None:
 
 
 def _cell(value: float | None) -> str:
-    return "-" if value is None else _pct(value)
+    return "-" if value is None else pct(value)
 
 
 def accuracy_table(path: Path = ACCURACY) -> str:
     """Table (d): the transition-net's balanced validation accuracy per input, beside the paper's Table 3."""
     path = Path(path)
     if not path.is_file():
-        return _not_yet(path)
+        return not_yet(path)
     report = json.loads(path.read_text(encoding="utf-8"))
     ours, paper = report["balanced_validation_accuracy"], report.get("paper_table_3", {})
     kinds = [k for k in INPUTS if k in ours] + [k for k in ours if k not in INPUTS]
-    header = " | ".join(_arrow(p) for p in PAPER_PAIRS)
+    header = " | ".join(arrow(p) for p in PAPER_PAIRS)
     lines = [f"| input | {header} | mean of these six | mean of all pairs |", "|---|" + "---|" * 8]
     means = {}
     for kind in kinds:
@@ -302,7 +259,7 @@ def accuracy_table(path: Path = ACCURACY) -> str:
         if means.get(better) is not None and means.get(worse) is not None:
             holds = means[better] >= means[worse] if sign == ">=" else means[better] > means[worse]
             claims.append(f"{better} {sign} {worse} {'holds' if holds else 'does not hold'} "
-                          f"({_pct(means[better])} against {_pct(means[worse])})")
+                          f"({pct(means[better])} against {pct(means[worse])})")
     falls = report.get("falls")
     labels = (f"labels by the `{falls}` definition" if falls else
               "labels by the `contact` definition (the fit predates the choice of definition)")
@@ -313,7 +270,7 @@ def accuracy_table(path: Path = ACCURACY) -> str:
              f"`{report.get('input_written', '?')}` is the input the shipped net uses; {report.get('samples', 0):,} "
              f"samples, {labels}."]
     return "\n".join([*lines, "", " ".join(n for n in notes if n), "",
-                      f"Evidence: `{_shown(path)}`, written by `{command}` (the data and inputs the file records)."])
+                      f"Evidence: `{shown(path)}`, written by `{command}` (the data and inputs the file records)."])
 
 
 def _fill(text: str) -> str:
@@ -333,8 +290,6 @@ def _wrap(body: str) -> str:
 def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
     ``ablation`` beside ``evidence_dir``."""
-    from robustness_tables import pushed_table, robustness_table, shove_table  # made with this module's helpers
-
     tables = {"quality-bar": quality_bar(evidence_dir),
               "robustness-gaits": robustness_table(Path(evidence_dir).parent / "ablation"),
               "shove-curves": shove_table(evidence_dir, Path(evidence_dir).parent / "ablation"),
@@ -409,11 +364,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"results_tables: {detail}", file=sys.stderr)
         return 2
     if name is not None:
-        print(f"{_shown(args.doc)}: the table '{name}' differs from what its stored evidence makes (or has no block); "
+        print(f"{shown(args.doc)}: the table '{name}' differs from what its stored evidence makes (or has no block); "
               "python benchmarks/results_tables.py rewrites it", file=sys.stderr)
         return 1
     state = "every table agrees with its stored evidence" if args.check else "rewritten" if changed else "up to date"
-    print(f"{_shown(args.doc)}: {state}")
+    print(f"{shown(args.doc)}: {state}")
     return 0
 
 

@@ -16,17 +16,18 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from results_tables import (
+from evidence import (
     EVIDENCE,
+    GAITS,
     ROOT,
-    _arrow,
-    _cite,
-    _groups_at,
-    _interval,
-    _not_yet,
-    _pct,
-    _settings_line,
+    arrow,
+    cite,
+    groups_at,
+    interval,
+    not_yet,
+    pct,
     read_evidence,
+    settings_line,
 )
 
 from gaitlib.stats import wilson_interval
@@ -64,8 +65,8 @@ def read_row(path: Path) -> dict | None:
     return {"made": stored["result"]["made"][:10]} | stored
 
 
-def _rate(count: int, total: int, interval: list[float]) -> str:
-    return f"{_pct(count / total)} {_interval(*interval)}"
+def _rate(count: int, total: int, bounds: list[float]) -> str:
+    return f"{pct(count / total)} {interval(*bounds)}"
 
 
 def _shove_at(figures: dict, impulse: float) -> dict | None:
@@ -92,7 +93,7 @@ def _shove_miss(figures: dict) -> str | None:
     point, name, falls, episodes = worst
     if falls / episodes <= BARS["single shove"]:
         return None
-    return f"{_pct(falls / episodes)}% in the {name} direction ({falls} of {episodes}) at {point['impulse_ns']:g} N s"
+    return f"{pct(falls / episodes)}% in the {name} direction ({falls} of {episodes}) at {point['impulse_ns']:g} N s"
 
 
 def misses(row: dict) -> dict[str, str]:
@@ -101,7 +102,7 @@ def misses(row: dict) -> dict[str, str]:
     found = {"single shove": _shove_miss(figures)}
     for bar, key in (("pushes up to 50 N", "push_50n"), ("0 N", "zero_n"), ("one step late", "one_step_late")):
         rate = figures[key]["fall_rate"]
-        found[bar] = f"{_pct(rate)}%" if rate > BARS[bar] else None
+        found[bar] = f"{pct(rate)}%" if rate > BARS[bar] else None
     return {bar: why for bar, why in found.items() if why}
 
 
@@ -117,7 +118,7 @@ def _falls_row(row: dict, sources: list[str]) -> str:
         worst = f"{name} {falls}/{episodes}" if falls else "none"
         cells += [_rate(point["falls"], point["episodes"], point["ci95"]), worst]
     for key in ("push_50n", "zero_n", "one_step_late"):
-        cells.append(f"{_pct(figures[key]['fall_rate'])} {_interval(*figures[key]['fall_ci95'])}")
+        cells.append(f"{pct(figures[key]['fall_rate'])} {interval(*figures[key]['fall_ci95'])}")
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
         cells.append(_rate(switch["falls"], switch["episodes"], switch["fall_ci95"]) if switch else "-")
@@ -131,12 +132,12 @@ def _touches_row(row: dict, sources: list[str]) -> str:
         point = _shove_at(figures, impulse)
         cells.append(_rate(point["touches"], point["episodes"], point["touch_ci95"]) if point else "-")
     for key in ("push_50n", "zero_n", "one_step_late"):
-        cells.append(f"{_pct(figures[key]['touch_rate'])} {_interval(*figures[key]['touch_ci95'])}")
+        cells.append(f"{pct(figures[key]['touch_rate'])} {interval(*figures[key]['touch_ci95'])}")
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
         cells.append(_rate(switch["touches"], switch["episodes"], switch["touch_ci95"]) if switch else "-")
     zero, minutes = figures["zero_n"], row.get("training_minutes")
-    cells += [f"{_pct(zero['speed_error'])}%", f"{zero['median_heading_change_deg']:.1f} deg",
+    cells += [f"{pct(zero['speed_error'])}%", f"{zero['median_heading_change_deg']:.1f} deg",
               "-" if minutes is None else f"{minutes:g}"]
     return f"| {row['gait']} | " + " | ".join(cells) + " |"
 
@@ -155,7 +156,7 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
     paths = {g: Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS}
     found = {g: (p, e) for g, p in paths.items() if (e := read_row(p)) is not None}
     if not found:
-        return _not_yet(Path(ablation_dir) / "GAIT-today.json")
+        return not_yet(Path(ablation_dir) / "GAIT-today.json")
     rows = [e["result"] for _, e in found.values()]
     sources = list(dict.fromkeys(s for r in rows for s in _sources(r["figures"])))
     shoves = [f"shove {i:g} N s" for i in SHOVES]
@@ -174,17 +175,17 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
              "Leg touches ridden through, % [95% interval]; speed and heading at 0 N:", "", *touches,
              *(_touches_row(r, sources) for r in rows), "",
              f"{' / '.join(runs)}. The bars (the robust recipe's goals): falls at most "
-             f"{_pct(BARS['single shove'])}% after a single shove of up to {SHOVE_UP_TO_NS:g} N s in any direction, "
-             f"{_pct(BARS['pushes up to 50 N'])}% under pushes up to 50 N, {_pct(BARS['0 N'])}% at 0 N and "
-             f"{_pct(BARS['one step late'])}% one step late. " + " ".join(_verdict(r) for r in rows)]
+             f"{pct(BARS['single shove'])}% after a single shove of up to {SHOVE_UP_TO_NS:g} N s in any direction, "
+             f"{pct(BARS['pushes up to 50 N'])}% under pushes up to 50 N, {pct(BARS['0 N'])}% at 0 N and "
+             f"{pct(BARS['one step late'])}% one step late. " + " ".join(_verdict(r) for r in rows)]
     missing = [g for g in ABLATION_GAITS if g not in found]
     if missing:
-        lines.append(_not_yet(*(paths[g] for g in missing)))
-    return "\n".join([*lines, "", "Evidence:", "", *(f"- {_cite(p, e)}" for p, e in found.values())])
+        lines.append(not_yet(*(paths[g] for g in missing)))
+    return "\n".join([*lines, "", "Evidence:", "", *(f"- {cite(p, e)}" for p, e in found.values())])
 
 
 def _cells(name: str, evidence: dict, magnitude: float) -> dict[str, dict]:
-    groups = _groups_at(evidence["result"], magnitude)
+    groups = groups_at(evidence["result"], magnitude)
     if STRATEGY not in groups:
         raise ValueError(f"{name}.json holds no {STRATEGY} group at {magnitude:g} N")
     return groups[STRATEGY]
@@ -194,9 +195,9 @@ def _success(cell: dict | None, goal: float) -> str:
     if cell is None:
         return "- | -"
     successes, samples = cell["successes"], cell["samples"]
-    rate = _pct(successes / samples)
+    rate = pct(successes / samples)
     bold = f"**{rate}**" if successes >= goal * samples else rate
-    return f"{bold} {_interval(*wilson_interval(successes, samples))} | {_pct(cell['touched'] / samples)}%"
+    return f"{bold} {interval(*wilson_interval(successes, samples))} | {pct(cell['touched'] / samples)}%"
 
 
 def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
@@ -205,32 +206,32 @@ def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
     paths = {name: Path(evidence_dir) / f"{name}.json" for name, *_ in BENCHMARKS}
     stored = {name: read_evidence(p) for name, p in paths.items()}
     if all(e is None for e in stored.values()):
-        return _not_yet(*paths.values())
+        return not_yet(*paths.values())
     found = [(stored[name], _cells(name, stored[name], magnitude), goal, title)
              for name, magnitude, goal, title in BENCHMARKS if stored[name] is not None]
     pairs = sorted({p for _, cells, _, _ in found for p in cells}, key=lambda p: p.split("-"))
     lines = ["| pair | " + " | ".join(f"{title} [95%] | {title} touches" for *_, title in found) + " |",
              "|---|" + "---|---|" * len(found)]
-    lines += [f"| {_arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
+    lines += [f"| {arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
               for p in pairs]
     pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
               for _, cells, _, _ in found]
-    lines.append("| all pairs | " + " | ".join(f"{_pct(s / n)} {_interval(*wilson_interval(s, n))} | {_pct(t / n)}%"
+    lines.append("| all pairs | " + " | ".join(f"{pct(s / n)} {interval(*wilson_interval(s, n))} | {pct(t / n)}%"
                                                 for s, n, t in pooled) + " |")
     reached = [sum(c["successes"] >= goal * c["samples"] for c in cells.values()) for _, cells, goal, _ in found]
     lines.append("| pairs at the goal or more | " + " | ".join(
-        f"{k} of {len(cells)} (goal {_pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
+        f"{k} of {len(cells)} (goal {pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
                  + " |")
     notes = []
     for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
         settings = evidence["result"]["settings"]
         robot = f", robot `{settings['robot']}`" if settings.get("robot") else ""
-        notes.append(f"{title}: {k} of {len(cells)} pairs reach {_pct(goal)}%; `{STRATEGY}`, "
-                     f"{_settings_line(settings)}{robot}.")
+        notes.append(f"{title}: {k} of {len(cells)} pairs reach {pct(goal)}%; `{STRATEGY}`, "
+                     f"{settings_line(settings)}{robot}.")
     absent = [paths[name] for name, e in stored.items() if e is None]
     if absent:
-        notes.append(_not_yet(*absent))
-    sources = [f"- {_cite(paths[name], e)}" for name, e in stored.items() if e is not None]
+        notes.append(not_yet(*absent))
+    sources = [f"- {cite(paths[name], e)}" for name, e in stored.items() if e is not None]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
 
 
@@ -249,16 +250,14 @@ def _curve(evidence_dir: Path, ablation_dir: Path, gait: str) -> tuple[list[dict
 def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) -> str:
     """Every gait's falls under one shove of each impulse, with its interval, the worst direction at the bar's
     impulse and the touches there."""
-    from results_tables import GAITS
-
     curves = {g: c for g in GAITS if (c := _curve(evidence_dir, ablation_dir, g)) is not None}
     absent = [Path(evidence_dir) / f"shove-{g}.json" for g in GAITS if g not in curves]
     if not curves:
-        return _not_yet(*absent)
+        return not_yet(*absent)
     impulses = sorted({float(p["impulse_ns"]) for points, _, _ in curves.values() for p in points})
     bar = f"{SHOVE_UP_TO_NS:g} N s"
     lines = ["| gait | " + " | ".join(f"{i:g} N s [95%]" for i in impulses)
-             + f" | worst direction at {bar} | touches at {bar} [95%] | at most {_pct(BARS['single shove'])}% up to "
+             + f" | worst direction at {bar} | touches at {bar} [95%] | at most {pct(BARS['single shove'])}% up to "
              f"{bar}, every direction |", "|---|" + "---|" * (len(impulses) + 3)]
     for gait, (points, _, _) in curves.items():
         at = {float(p["impulse_ns"]): p for p in points}
@@ -274,12 +273,12 @@ def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) ->
         verdict = f"no: {miss}" if miss else "yes"
         lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
     met = [g for g, (points, _, _) in curves.items() if _shove_miss({"single_shove": points}) is None]
-    sources = "\n".join(f"- {_cite(path, record)}" for _, path, record in curves.values())
+    sources = "\n".join(f"- {cite(path, record)}" for _, path, record in curves.values())
     episodes = sorted({p["episodes"] for points, _, _ in curves.values() for p in points})
     sizes = ", ".join(f"{e:,}" for e in episodes)
     notes = [f"One 0.1 s push per episode at a random phase and direction, {sizes} episodes a "
              f"point, falls by the `trunk` definition. {len(met)} of {len(curves)} gaits meet the bar"
              + (f" ({', '.join(met)})." if met else ".")]
     if absent:
-        notes.append(_not_yet(*absent))
+        notes.append(not_yet(*absent))
     return "\n".join([*lines, "", *notes, "", "Evidence:", "", sources])

@@ -275,7 +275,7 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
 
 def _interval(count: int, total: int) -> str:
     low, high = wilson_interval(count, total)
-    return f"[{tables._pct(low)}, {tables._pct(high)}]"
+    return f"[{tables.pct(low)}, {tables.pct(high)}]"
 
 
 def test_the_pairs_pushed_and_on_another_a1_from_small_evidence(tmp_path: Path, evidence: Path) -> None:

@@ -1,0 +1,74 @@
+"""What the tables of docs/results.md share: where the stored evidence is, how a file of it is read and cited, and
+how a rate, an interval, a pair and a benchmark's settings are written (``benchmarks/results_tables.py`` and
+``benchmarks/robustness_tables.py`` make the tables)."""
+
+from __future__ import annotations
+
+import json
+from decimal import ROUND_HALF_UP, Decimal
+from pathlib import Path
+
+__all__ = [
+    "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite", "groups_at", "interval", "not_yet", "pct",
+    "read_evidence", "settings_line", "shown",
+]
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The repository."""
+EVIDENCE = ROOT / "docs" / "results" / "library"
+"""The stored raw results of the shipped library."""
+GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
+"""The shipped gaits, in the order the tables list them."""
+STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
+"""Column order of the strategies in a switching table."""
+
+
+def read_evidence(path: Path) -> dict | None:
+    """The evidence stored at ``path`` (``command``, ``made``, ``result``); ``None`` when there is none yet."""
+    if not path.is_file():
+        return None
+    evidence = json.loads(path.read_text(encoding="utf-8"))
+    missing = sorted({"command", "made", "result"} - set(evidence))
+    if missing:
+        raise ValueError(f"{path} is not an evidence file: no {', '.join(missing)}")
+    return evidence
+
+
+def shown(path: Path) -> str:
+    """``path`` as the doc names it: from the repository root when under it."""
+    path = Path(path).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def cite(path: Path, evidence: dict) -> str:
+    return f"`{shown(path)}` (made {evidence['made']}): `{evidence['command']}`"
+
+
+def not_yet(*paths: Path) -> str:
+    return "Not yet measured: " + ", ".join(f"`{shown(p)}`" for p in paths) + " not stored yet."
+
+
+def pct(rate: float) -> str:
+    """A rate as a percentage to a tenth, halves rounded up as written (the paper's 0.8915 is 89.2, not 89.1)."""
+    return str((Decimal(str(rate)) * 100).quantize(Decimal("0.1"), rounding=ROUND_HALF_UP))
+
+
+def interval(low: float, high: float) -> str:
+    return f"[{pct(low)}, {pct(high)}]"
+
+
+def arrow(pair: str) -> str:
+    return pair.replace("-", " → ")
+
+
+def groups_at(result: dict, magnitude: float) -> dict[str, dict]:
+    """strategy -> its cells (pair -> counts) at ``magnitude`` N, strategies in :data:`STRATEGIES` order."""
+    groups = {g["strategy"]: g["cells"] for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude}
+    order = {s: i for i, s in enumerate(STRATEGIES)}
+    return dict(sorted(groups.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
+
+
+def settings_line(settings: dict) -> str:
+    """What a benchmark's cells are: size, seed and the definition of a fall."""
+    return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
+           "definition"
