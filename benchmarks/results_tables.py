@@ -3,14 +3,14 @@
     python benchmarks/results_tables.py            # rewrite the generated blocks of docs/results.md
     python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
 
-Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``,
-``robustness-gaits``, ``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the
-robustness tables are made in ``benchmarks/robustness_tables.py``, what both share is ``benchmarks/evidence.py``).
-Everything between the two is made here from the evidence and nothing else, so a figure edited by hand, or a
-stored result replaced without rewriting the doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each ``{"command": the exact
-command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust recipe's ablation rows beside
-them (``docs/results/ablation/``), and the library's own ``library/switching/accuracy.json``. A table whose evidence
-is not stored yet says "not yet measured".
+Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``robustness-gaits``,
+``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the robustness tables are made in
+``benchmarks/robustness_tables.py``, what both share is ``benchmarks/evidence.py``). Everything between the two is made
+here from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the
+doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
+``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust recipe's
+ablation rows beside them (``docs/results/ablation/``), and the library's own ``library/switching/accuracy.json``. A
+table whose evidence is not stored yet says "not yet measured".
 """
 
 from __future__ import annotations
