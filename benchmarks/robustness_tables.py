@@ -259,6 +259,7 @@ def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) ->
     lines = ["| gait | " + " | ".join(f"{i:g} N s [95%]" for i in impulses)
              + f" | worst direction at {bar} | touches at {bar} [95%] | at most {pct(BARS['single shove'])}% up to "
              f"{bar}, every direction |", "|---|" + "---|" * (len(impulses) + 3)]
+    verdicts = {gait: _shove_miss({"single_shove": points}) for gait, (points, _, _) in curves.items()}
     for gait, (points, _, _) in curves.items():
         at = {float(p["impulse_ns"]): p for p in points}
         cells = [_rate(at[i]["falls"], at[i]["episodes"], at[i]["ci95"]) if i in at else "-" for i in impulses]
@@ -269,10 +270,9 @@ def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) ->
             name, falls, episodes = _worst(point)
             worst = f"{name} {falls}/{episodes}" if falls else "none"
             touches = _rate(point["touches"], point["episodes"], point["touch_ci95"])
-        miss = _shove_miss({"single_shove": points})
-        verdict = f"no: {miss}" if miss else "yes"
+        verdict = f"no: {verdicts[gait]}" if verdicts[gait] else "yes"
         lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
-    met = [g for g, (points, _, _) in curves.items() if _shove_miss({"single_shove": points}) is None]
+    met = [g for g, miss in verdicts.items() if miss is None]
     sources = "\n".join(f"- {cite(path, record)}" for _, path, record in curves.values())
     episodes = sorted({p["episodes"] for points, _, _ in curves.values() for p in points})
     sizes = ", ".join(f"{e:,}" for e in episodes)

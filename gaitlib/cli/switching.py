@@ -281,11 +281,13 @@ def routes_command(
     check_worlds("--worlds", worlds, backend=backend)
     target, copy_from = writing_target(library)
     check_writable(target, replace=replace, command="gaitlib routes", what="the route table")
-    get_strategy(strategy, load_switching(copy_from or target).resources)  # unknown or missing: one line, no work
+    setup = load_switching(copy_from or target)
+    get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work
     if copy_from is not None:
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib routes"):  # no refit while the pairs are measured
-        setup = load_switching(target)
+        if copy_from is not None:
+            setup = load_switching(target)  # the copy, which the table is written into
         lib = setup.resources.library
         out = out or Path("runs") / f"routes-{measurement_id(lib)}"
         config = SweepConfig(strategies=(strategy,), magnitudes=(push,), samples=samples, num_worlds=worlds,

@@ -213,10 +213,9 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
     for column in ("impulse N s", "force N", "falls", *SECTORS, "touches", "longest touch s"):
         table.add_column(column, justify="right")
     for p in points:
-        rate = f"{100 * p.fall_rate:.1f}% [{100 * p.ci95[0]:.1f}, {100 * p.ci95[1]:.1f}]"
         sectors = (f"{f}/{k}" for f, k in p.by_sector.values())
-        touches = f"{100 * p.touches / p.episodes:.1f}% [{100 * p.touch_ci95[0]:.1f}, {100 * p.touch_ci95[1]:.1f}]"
-        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate, *sectors, touches, f"{p.longest_touch_s:.2f}")
+        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", _rate(p.fall_rate, p.ci95, digits=1), *sectors,
+                      _rate(p.touches / p.episodes, p.touch_ci95, digits=1), f"{p.longest_touch_s:.2f}")
     table_console().print(table)
 
 
@@ -231,9 +230,9 @@ def _interval(text: str) -> tuple[float, float]:
     return low, high
 
 
-def _rate(rate: float, ci95: tuple[float, float]) -> str:
-    """A rate in percent with its 95% interval."""
-    return f"{100 * rate:.2f}% [{100 * ci95[0]:.2f}, {100 * ci95[1]:.2f}]"
+def _rate(rate: float, ci95: tuple[float, float], *, digits: int = 2) -> str:
+    """A rate in percent with its 95% interval, to ``digits`` decimals."""
+    return f"{100 * rate:.{digits}f}% [{100 * ci95[0]:.{digits}f}, {100 * ci95[1]:.{digits}f}]"
 
 
 def _say_status(console, library: Path, gait: str) -> None:

@@ -293,7 +293,6 @@ class Library:
             write_json(staging / "metadata.json", metadata, checksum=True)
         return self.root / description.name
 
-
     def record_evaluation(self, name: str, evaluation: dict) -> Path:
         """Make ``evaluation`` the stored evaluation of entry ``name`` (its ``metadata.json``; the weights and
         everything else untouched), published like a new entry: a reader sees the old or the new folder whole."""

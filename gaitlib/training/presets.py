@@ -58,9 +58,13 @@ class TrainPreset:
         """Iterations over which the largest push grows, in a run of ``iterations`` iterations."""
         return max(1, round(self.push_ramp * iterations))
 
+    def push_share(self, iteration: int, iterations: int) -> float:
+        """How far along the push curriculum iteration ``iteration`` (0-based) of a run of ``iterations`` is, 0-1."""
+        return min(1.0, iteration / self.push_ramp_iterations(iterations))
+
     def push_limit(self, iteration: int, iterations: int) -> float:
         """Largest training push during iteration ``iteration`` (0-based) of a run of ``iterations``, N."""
-        return self.push_max * min(1.0, iteration / self.push_ramp_iterations(iterations))
+        return self.push_max * self.push_share(iteration, iterations)
 
     @property
     def batch_size(self) -> int:

@@ -107,8 +107,7 @@ class Recipe:
         control step."""
         if self.push_kind == "force":
             return preset.push_limit(iteration, iterations)
-        share = min(1.0, iteration / preset.push_ramp_iterations(iterations))
-        return TOTAL_MASS * self.kick_max * share / control_dt
+        return TOTAL_MASS * self.kick_max * preset.push_share(iteration, iterations) / control_dt
 
     def as_dict(self) -> dict:
         """What the entry's metadata records."""
