@@ -4,8 +4,11 @@ field, and the shipped libraries still load (benchmarks/byte_flips.py --edits fu
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,6 +44,20 @@ def test_the_shipped_libraries_pass_their_schemas(root) -> None:
         assert load_routes(library, library.gaits()).detours()
 
 
+@contextlib.contextmanager
+def edited(path: Path, change) -> Iterator[None]:
+    """``path``'s JSON changed by ``change`` with a matching checksum while the block runs, then put back."""
+    pristine = path.read_text()
+    content = json.loads(pristine)
+    content.pop("checksum")
+    change(content)
+    write_foreign_json(path, content)
+    try:
+        yield
+    finally:
+        path.write_text(pristine)
+
+
 @pytest.fixture(scope="module")
 def shipped_copy(tmp_path_factory) -> Library:
     return copy_library(Library(), tmp_path_factory.mktemp("shipped") / "library")
@@ -62,17 +79,10 @@ ROUTE_EDITS = {
 @pytest.mark.parametrize("edit", list(ROUTE_EDITS), ids=list(ROUTE_EDITS))
 def test_an_impossible_route_table_is_refused_naming_the_field(shipped_copy, edit) -> None:
     path = shipped_copy.switching_dir / ROUTES_FILE
-    pristine = path.read_text()
     change, message = ROUTE_EDITS[edit]
-    table = json.loads(pristine)
-    table.pop("checksum")
-    change(table)
-    write_foreign_json(path, table)
-    try:
+    with edited(path, change):
         refused(lambda: load_routes(Library(shipped_copy.root), shipped_copy.gaits()), GaitlibError,
                 f"{path} is damaged: ", message)
-    finally:
-        path.write_text(pristine)
     assert load_routes(Library(shipped_copy.root), shipped_copy.gaits())  # the pristine table still loads
 
 
@@ -149,17 +159,10 @@ METADATA_EDITS = {
 @pytest.mark.parametrize("edit", list(METADATA_EDITS), ids=list(METADATA_EDITS))
 def test_impossible_entry_metadata_is_refused_naming_the_field(shipped_copy, edit) -> None:
     path = shipped_copy.root / "stand" / "metadata.json"
-    pristine = path.read_text()
     change, message = METADATA_EDITS[edit]
-    metadata = json.loads(pristine)
-    metadata.pop("checksum")
-    change(metadata)
-    write_foreign_json(path, metadata)
-    try:
+    with edited(path, change):
         refused(lambda: Library(shipped_copy.root).entry("stand"), LibraryError,
                 "library entry 'stand' has damaged metadata: ", message, str(path))
-    finally:
-        path.write_text(pristine)
     assert Library(shipped_copy.root).entry("stand").identity
 
 
