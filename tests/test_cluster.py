@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
+import time
 
 import numpy as np
 import pytest
@@ -66,14 +69,28 @@ def plain(tiny_library, tmp_path_factory):
     return read(path)
 
 
+def kill_and_wait(pid: int, timeout_s: float = 30.0) -> None:
+    """SIGKILL a worker's process and return once it is gone, so the pool meets a dead worker on its next task (a
+    ``ray.kill`` is asynchronous: a task sent just after it may still run, and the kill then tests nothing)."""
+    os.kill(pid, signal.SIGKILL)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"worker process {pid} still alive {timeout_s} s after SIGKILL")
+
+
 def test_a_killed_worker_loses_no_committed_sample(local_ray, tiny_library, plain, tmp_path) -> None:
     path, seen = tmp_path / "t.h5", []
 
     def kill_a_worker(progress) -> None:
         names = sorted(n for n in ray.util.list_named_actors() if n.startswith(WORKER_PREFIX))
         seen.append((progress.samples, read(path).samples, names))
-        if len(seen) == 1:  # after the first commit, with chunks still under way
-            ray.kill(ray.get_actor(names[0]))
+        if len(seen) == 1:  # after the first commit, with chunks still to hand out: kill a worker's process
+            kill_and_wait(ray.get(ray.get_actor(names[0]).pid.remote()))
 
     result = collect(path, library=tiny_library, gaits=GAITS, config=SMALL, progress=kill_a_worker,
                      cluster=ClusterConfig(workers=2))

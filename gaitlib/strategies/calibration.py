@@ -48,7 +48,7 @@ def platt(score: np.ndarray, success: np.ndarray, weight: np.ndarray | None = No
     target = np.where(y, (positives + 1) / (positives + 2), 1 / (negatives + 2))
     a, b = 1.0, 0.0
     for _ in range(100):
-        p = 1 / (1 + np.exp(-(a * z + b)))
+        p = 0.5 * (1 + np.tanh(0.5 * (a * z + b)))  # the logistic function, without exp's overflow
         gradient = np.array([np.sum(w * (p - target) * z), np.sum(w * (p - target))])
         curvature = w * np.maximum(p * (1 - p), 1e-12)
         cross = np.sum(curvature * z)
