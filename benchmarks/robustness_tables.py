@@ -1,9 +1,10 @@
 """The robustness tables of docs/results.md: the gaits themselves against the robust recipe's goals, and the thirty
 switches under pushes and on another A1. ``benchmarks/results_tables.py`` writes them into the doc with the others.
 
-- ``robustness-gaits``: ``docs/results/ablation/GAIT-today.json`` for each gait of :data:`ABLATION_GAITS`, each
-  ``{"command", "result"}`` as ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``):
-  falls and leg touches with their 95% intervals, and each gait against :data:`BARS`, read from its numbers.
+- ``robustness-gaits``: the robust recipe's ablation, ``docs/results/ablation/GAIT-VARIANT.json`` for each gait of
+  :data:`ABLATION_GAITS` (``GAIT-today.json``: the shipped gait, today's recipe), each ``{"command", "result"}`` as
+  ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``): falls and leg touches with
+  their 95% intervals, each row's recipe, and each row against :data:`BARS`, read from its numbers.
 - ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
   like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
   reach each setting's goal (:data:`BENCHMARKS`).
@@ -31,10 +32,11 @@ from evidence import (
 )
 
 from gaitlib.stats import wilson_interval
+from gaitlib.training.recipe import Recipe
 
 __all__ = [
-    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "SHOVES", "misses", "pushed_table", "read_row",
-    "robustness_table", "shove_table",
+    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "SHOVES", "ablation_rows", "misses", "pushed_table",
+    "read_row", "recipe_options", "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
@@ -106,7 +108,7 @@ def misses(row: dict) -> dict[str, str]:
     return {bar: why for bar, why in found.items() if why}
 
 
-def _falls_row(row: dict, sources: list[str]) -> str:
+def _falls_row(label: str, row: dict, sources: list[str]) -> str:
     figures = row["figures"]
     cells = []
     for impulse in SHOVES:
@@ -122,10 +124,10 @@ def _falls_row(row: dict, sources: list[str]) -> str:
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
         cells.append(_rate(switch["falls"], switch["episodes"], switch["fall_ci95"]) if switch else "-")
-    return f"| {row['gait']} | " + " | ".join(cells) + " |"
+    return f"| {label} | " + " | ".join(cells) + " |"
 
 
-def _touches_row(row: dict, sources: list[str]) -> str:
+def _touches_row(label: str, row: dict, sources: list[str]) -> str:
     figures = row["figures"]
     cells = []
     for impulse in SHOVES:
@@ -139,48 +141,80 @@ def _touches_row(row: dict, sources: list[str]) -> str:
     zero, minutes = figures["zero_n"], row.get("training_minutes")
     cells += [f"{pct(zero['speed_error'])}%", f"{zero['median_heading_change_deg']:.1f} deg",
               "-" if minutes is None else f"{minutes:g}"]
-    return f"| {row['gait']} | " + " | ".join(cells) + " |"
+    return f"| {label} | " + " | ".join(cells) + " |"
 
 
-def _verdict(row: dict) -> str:
+def _verdict(label: str, row: dict) -> str:
     missed = misses(row)
     met = [bar for bar in BARS if bar not in missed]
-    text = f"The {row['gait']} meets {len(met)} of the {len(BARS)} bars"
+    text = f"{label}: meets {len(met)} of the {len(BARS)} bars"
     text += f" ({', '.join(met)})" if met else ""
-    return text + (f" and misses {'; '.join(f'{bar}: {why}' for bar, why in missed.items())}." if missed else ".")
+    return text + (f"; misses {'; '.join(f'{bar}: {why}' for bar, why in missed.items())}." if missed else ".")
+
+
+def recipe_options(recipe: dict | str) -> str:
+    """A row's recipe as the ``gaitlib train`` options that set it apart from the defaults (today's recipe)."""
+    if not isinstance(recipe, dict):
+        return "today's recipe"
+    default = json.loads(json.dumps(Recipe().as_dict()))
+    kicks = ("kick_max", "kick_interval") if recipe.get("push_kind") == "kick" else ()
+    options = []
+    for key in (k for k, v in recipe.items() if default.get(k) != v or k in kicks):
+        value = recipe[key]
+        if value is True:
+            options.append(f"--{key.replace('_', '-')}")
+        elif isinstance(value, list):
+            options.append(f"--{key.replace('_', '-')} " + ":".join(f"{v:g}" for v in value))
+        else:
+            options.append(f"--{key.replace('_', '-')} {value:g}" if isinstance(value, float)
+                           else f"--{key.replace('_', '-')} {value}")
+    return f"`{' '.join(options)}`" if options else "today's recipe"
+
+
+def ablation_rows(ablation_dir: Path = ABLATION) -> dict[str, tuple[Path, dict]]:
+    """Every stored ablation row by its label ("GAIT, VARIANT"): for each gait of :data:`ABLATION_GAITS`, today's
+    recipe first, then its variants by file name."""
+    found = {}
+    for gait in ABLATION_GAITS:
+        paths = sorted(Path(ablation_dir).glob(f"{gait}-*.json"), key=lambda p: (p.stem != f"{gait}-today", p.stem))
+        for path in paths:
+            found[f"{gait}, {path.stem.removeprefix(f'{gait}-')}"] = (path, read_row(path))
+    return found
 
 
 def robustness_table(ablation_dir: Path = ABLATION) -> str:
-    """``robustness-gaits``: the shipped gaits' ablation rows (``GAIT-today.json``), falls then touches, and each
-    gait against :data:`BARS`."""
-    paths = {g: Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS}
-    found = {g: (p, e) for g, p in paths.items() if (e := read_row(p)) is not None}
+    """``robustness-gaits``: every ablation row (``GAIT-VARIANT.json``, today's recipe ``GAIT-today.json``), falls
+    then touches, each row's recipe, and each row against :data:`BARS`."""
+    found = ablation_rows(ablation_dir)
     if not found:
         return not_yet(Path(ablation_dir) / "GAIT-today.json")
-    rows = [e["result"] for _, e in found.values()]
-    sources = list(dict.fromkeys(s for r in rows for s in _sources(r["figures"])))
+    rows = {label: e["result"] for label, (_, e) in found.items()}
+    sources = list(dict.fromkeys(s for r in rows.values() for s in _sources(r["figures"])))
     shoves = [f"shove {i:g} N s" for i in SHOVES]
     others = ["pushes up to 50 N", "0 N", "one step late", *(f"switch in from {s}" for s in sources)]
-    falls = ["| gait | " + " | ".join(f"{s} [95%] | worst direction" for s in shoves) + " | "
+    falls = ["| gait, recipe | " + " | ".join(f"{s} [95%] | worst direction" for s in shoves) + " | "
              + " | ".join(f"{o} [95%]" for o in others) + " |",
              "|---|" + "---|---|" * len(shoves) + "---|" * len(others)]
-    touches = ["| gait | " + " | ".join(f"{c} [95%]" for c in [*shoves, *others])
+    touches = ["| gait, recipe | " + " | ".join(f"{c} [95%]" for c in [*shoves, *others])
                + " | speed error (0 N) | median heading change (0 N) | training, minutes |",
                "|---|" + "---|" * (len(shoves) + len(others) + 3)]
     runs = sorted({f"{r['settings']['episodes']:,} episodes of {r['settings']['seconds']:g} s a figure, "
                    f"{r['settings']['switches']:,} switches from each source; seed {r['settings']['seed']}, falls by "
-                   f"the `{r['settings']['falls']}` definition" for r in rows})
+                   f"the `{r['settings']['falls']}` definition" for r in rows.values()})
+    recipes = [f"- {label}: {recipe_options(r['recipe'])}, {r['iterations']:,} iterations"
+               for label, r in rows.items()]
     lines = ["Falls, % of episodes (of switches for a switch in) [95% interval]; a shove's worst direction: its falls "
-             "of its episodes:", "", *falls, *(_falls_row(r, sources) for r in rows), "",
+             "of its episodes:", "", *falls, *(_falls_row(k, r, sources) for k, r in rows.items()), "",
              "Leg touches ridden through, % [95% interval]; speed and heading at 0 N:", "", *touches,
-             *(_touches_row(r, sources) for r in rows), "",
+             *(_touches_row(k, r, sources) for k, r in rows.items()), "",
+             "The recipes (`gaitlib train` options beyond today's recipe):", "", *recipes, "",
              f"{' / '.join(runs)}. The bars (the robust recipe's goals): falls at most "
              f"{pct(BARS['single shove'])}% after a single shove of up to {SHOVE_UP_TO_NS:g} N s in any direction, "
              f"{pct(BARS['pushes up to 50 N'])}% under pushes up to 50 N, {pct(BARS['0 N'])}% at 0 N and "
-             f"{pct(BARS['one step late'])}% one step late. " + " ".join(_verdict(r) for r in rows)]
-    missing = [g for g in ABLATION_GAITS if g not in found]
+             f"{pct(BARS['one step late'])}% one step late.", "", *(f"- {_verdict(k, r)}" for k, r in rows.items())]
+    missing = [Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS if f"{g}, today" not in found]
     if missing:
-        lines.append(not_yet(*(paths[g] for g in missing)))
+        lines.append(not_yet(*missing))
     return "\n".join([*lines, "", "Evidence:", "", *(f"- {cite(p, e)}" for p, e in found.values())])
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from gaitlib.stats import wilson_interval
+from gaitlib.training.recipe import Recipe
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "results_tables.py"
@@ -246,7 +247,7 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
     command = "python benchmarks/robust_ablation.py --gait pace --states data/states-0n.npz --out pace-today.json"
     (folder / "pace-today.json").write_text(json.dumps({"command": command, "result": pace}))
     made = _flat(robustness.robustness_table(folder))
-    assert "The pace meets 2 of the 4 bars (pushes up to 50 N, 0 N) and misses single shove: 1.6% in the left " \
+    assert "pace, today: meets 2 of the 4 bars (pushes up to 50 N, 0 N); misses single shove: 1.6% in the left " \
            "direction (4 of 256) at 12 N s; one step late: 2.9%." in made
     assert f"Not yet measured: `{folder / 'trot-today.json'}` not stored yet." in made
     assert f"`{folder / 'pace-today.json'}` (made 2026-12-04): `{command}`" in made  # the row's own date
@@ -258,19 +259,32 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
     body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robustness-gaits"]
     assert _prose_fits(body) and "Not yet measured" not in body
     made = _flat(body)
-    assert "The trot meets 3 of the 4 bars (single shove, 0 N, one step late) and misses pushes up to 50 N: 2.9%." \
+    assert "trot, today: meets 3 of the 4 bars (single shove, 0 N, one step late); misses pushes up to 50 N: 2.9%." \
            in made
-    header = next(line for line in body.splitlines() if line.startswith("| gait | shove 6 N s [95%] | worst"))
+    header = next(line for line in body.splitlines() if line.startswith("| gait, recipe | shove 6 N s [95%] | worst"))
     assert header.endswith("| switch in from trot [95%] | switch in from stand [95%] | switch in from pace [95%] |")
     shove = f"0.4 {_interval(4, 1024)} | left 4/256"
-    assert f"| pace | 0.0 {_interval(0, 1024)} | none | {shove} | 2.0 {_interval(20, 1024)} | front 5/256 |" in made
+    assert f"| pace, today | 0.0 {_interval(0, 1024)} | none | {shove} | 2.0 {_interval(20, 1024)} " \
+           "| front 5/256 |" in made
     assert f"| 1.0 {_interval(10, 1024)} | 0.1 {_interval(1, 1024)} | 2.9 {_interval(30, 1024)} " \
            f"| 0.7 {_interval(7, 1000)} | 1.2 {_interval(12, 1000)} | - |" in made  # no switch in from itself
-    assert f"| trot | 0.0 {_interval(0, 1024)} | none | 0.8 {_interval(8, 1024)} | front 2/256 |" in made
+    assert f"| trot, today | 0.0 {_interval(0, 1024)} | none | 0.8 {_interval(8, 1024)} | front 2/256 |" in made
     switches = f"4.0 {_interval(40, 1000)} | 4.0 {_interval(40, 1000)}"
     assert f"| 0.3 {_interval(3, 1024)} | {switches} | - | 2.2% | 4.3 deg | 83.3 |" in made
     assert f"| 0.3 {_interval(3, 1024)} | - | {switches} | 2.2% | 4.3 deg | - |" in made  # the trot's time not recorded
     assert "1,024 episodes of 20 s a figure, 1,000 switches from each source; seed 0" in made
+    assert "- pace, today: today's recipe, 1,500 iterations" in made
+    # a variant of the pace: its row after today's, its recipe as the train options that set it apart
+    kick = _ablation("pace", ("trot", "stand"), shove=dict.fromkeys(("front", "left", "back", "right"), 0), push=0,
+                     zero=0, late=0, minutes=50.2)
+    kick["recipe"] = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0, gamma=0.99).as_dict()
+    (folder / "pace-kick.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
+                                                        "result": kick}))
+    made = _flat(robustness.robustness_table(folder))
+    assert made.index("| pace, today |") < made.index("| pace, kick |") < made.index("| trot, today |")
+    assert "- pace, kick: `--push-kind kick --kick-max 1 --kick-interval 1:3 --terminate trunk --contact-penalty 1 " \
+           "--gamma 0.99`, 1,500 iterations" in made
+    assert "pace, kick: meets 4 of the 4 bars (single shove, pushes up to 50 N, 0 N, one step late)." in made
 
 
 def _interval(count: int, total: int) -> str:
