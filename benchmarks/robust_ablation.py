@@ -10,7 +10,8 @@ switch would hand them over). Each figure is the command's own evaluation, nothi
 - single shove: ``gaitlib eval GAIT --impulses 0:30:6 --episodes 1024`` (one 0.1 s push at a random phase and
   direction per episode, falls per impulse and per direction);
 - pushes while walking: ``gaitlib eval GAIT --push-max 50 --episodes 1024 --seconds 20``;
-- falls and touches at 0 N with the trained delay, and one step late (``--late 1``), 1,024 x 20 s each;
+- falls and touches at 0 N with the trained delay (Table 1's random 0-1 control steps, or the fixed delay of a
+  variant trained with ``--action-delay K``), and one step late (``--late 1``), 1,024 x 20 s each;
 - switches into the gait at random moments from each source gait's states, 1,000 each (2.5 s horizon);
 - speed and median heading change against the quality bar (from the 0 N run), training minutes (the entry's
   metadata).
@@ -48,12 +49,16 @@ def ablation_row(library: Library, gait: str, *, states: Path, sources: list[str
         timings[name] = round(time.perf_counter() - start, 1)
 
     common = {"env_cfg": env_cfg, "backend": backend, "seed": seed}
+    recipe = entry.metadata.get("training", {}).get("recipe")
+    trained_delay = recipe.get("action_delay") if isinstance(recipe, dict) else None  # None: Table 1's random 0-1
     timed("single_shove", lambda: [p.as_dict() for p in single_push_curve(
         entry.policy, entry.clip, impulses=impulses, episodes=episodes, **common)])
-    for name, push, late in (("push_50n", 50.0, 0), ("zero_n", 0.0, 0), ("one_step_late", 0.0, 1)):
-        timed(name, lambda push=push, late=late: evaluate_policy(
+    # pushes while walking under Table 1's delay, as every other figure; 0 N and one step late from the trained delay
+    for name, push, late, delay in (("push_50n", 50.0, 0, None), ("zero_n", 0.0, 0, trained_delay),
+                                    ("one_step_late", 0.0, 1, trained_delay)):
+        timed(name, lambda push=push, late=late, delay=delay: evaluate_policy(
             entry.policy, entry.clip, episodes=episodes, seconds=seconds, push_max=push, late_steps=late,
-            **common).as_dict())
+            action_delay_steps=delay, **common).as_dict())
     recorded, sha256 = load_states(states)
     for source in sources:
         timed(f"switch_in_from_{source}", lambda source=source: switch_in(

@@ -134,3 +134,35 @@ def test_switching_in_from_recorded_states_counts_falls_and_touches(tmp_path) ->
     assert result.fall_ci95[0] <= result.falls / 12 <= result.fall_ci95[1] and result.falls_definition == "trunk"
     with pytest.raises(GaitlibError, match="the states hold none recorded while 'walk' ran"):
         switch_in(stand.policy, stand.clip, env_cfg=env_cfg, states=states, source="walk", episodes=2)
+
+
+def test_an_ablation_row_measures_a_fixed_delay_variant_at_its_trained_delay(tmp_path) -> None:
+    """``benchmarks/robust_ablation.py`` on a stand trained with every action one step late: 0 N at that delay and
+    one step later, pushes while walking at Table 1's random delay like every other figure; its recipe, training
+    time and every figure recorded."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    ablation = importlib.import_module("robust_ablation")
+    library = tmp_path / "library"
+    trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",
+                            "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"),
+                            "--action-delay", "1")
+    assert trained.returncode == 0, trained.stderr
+    states = tmp_path / "s.npz"
+    recorded = gaitlib_quick("states", "--gaits", "trot", "--per-gait", "8", "--worlds", "8", "--backend", "mujoco",
+                             "--out", str(states))
+    assert recorded.returncode == 0, recorded.stderr
+    row = ablation.ablation_row(Library(library), "stand", states=states, sources=["trot"], impulses=[0.0, 12.0],
+                                episodes=4, switches=4, seconds=1.0, backend="mujoco", seed=0)
+    figures = row["figures"]
+    assert (figures["zero_n"]["action_delay_steps"], figures["zero_n"]["late_steps"]) == (1, 0)
+    assert (figures["one_step_late"]["action_delay_steps"], figures["one_step_late"]["late_steps"]) == (1, 1)
+    assert figures["push_50n"]["action_delay_steps"] is None and figures["push_50n"]["push_max"] == 50.0
+    assert [p["impulse_ns"] for p in figures["single_shove"]] == [0.0, 12.0]
+    assert figures["switch_in_from_trot"]["episodes"] == 4 and row["recipe"]["action_delay"] == 1
+    assert row["training_minutes"] >= 0 and row["iterations"] == 1 and len(row["states"]["sha256"]) == 64
+    assert set(figures["quality_bar"]) == {"speed_error", "speed_within_10_percent", "median_heading_change_deg",
+                                       "heading_within_15_deg"}
