@@ -160,14 +160,13 @@ def recipe_options(recipe: dict | str) -> str:
     kicks = ("kick_max", "kick_interval") if recipe.get("push_kind") == "kick" else ()
     options = []
     for key in (k for k, v in recipe.items() if default.get(k) != v or k in kicks):
-        value = recipe[key]
+        value, option = recipe[key], f"--{key.replace('_', '-')}"
         if value is True:
-            options.append(f"--{key.replace('_', '-')}")
+            options.append(option)
         elif isinstance(value, list):
-            options.append(f"--{key.replace('_', '-')} " + ":".join(f"{v:g}" for v in value))
+            options.append(f"{option} " + ":".join(f"{v:g}" for v in value))
         else:
-            options.append(f"--{key.replace('_', '-')} {value:g}" if isinstance(value, float)
-                           else f"--{key.replace('_', '-')} {value}")
+            options.append(f"{option} {value:g}" if isinstance(value, float) else f"{option} {value}")
     return f"`{' '.join(options)}`" if options else "today's recipe"
 
 
