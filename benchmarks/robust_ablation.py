@@ -49,7 +49,8 @@ def ablation_row(library: Library, gait: str, *, states: Path, sources: list[str
         timings[name] = round(time.perf_counter() - start, 1)
 
     common = {"env_cfg": env_cfg, "backend": backend, "seed": seed}
-    recipe = entry.metadata.get("training", {}).get("recipe")
+    training = entry.metadata.get("training", {})
+    recipe = training.get("recipe")
     trained_delay = recipe.get("action_delay") if isinstance(recipe, dict) else None  # None: Table 1's random 0-1
     timed("single_shove", lambda: [p.as_dict() for p in single_push_curve(
         entry.policy, entry.clip, impulses=impulses, episodes=episodes, **common)])
@@ -64,7 +65,6 @@ def ablation_row(library: Library, gait: str, *, states: Path, sources: list[str
         timed(f"switch_in_from_{source}", lambda source=source: switch_in(
             entry.policy, entry.clip, states=recorded, source=source, episodes=switches, **common).as_dict())
     zero = row["zero_n"]
-    training = entry.metadata.get("training", {})
     row["quality_bar"] = {
         "speed_error": zero["speed_error"],
         "speed_within_10_percent": zero["speed_error"] <= 0.10,
