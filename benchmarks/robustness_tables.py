@@ -156,10 +156,12 @@ def recipe_options(recipe: dict | str) -> str:
     """A row's recipe as the ``gaitlib train`` options that set it apart from the defaults (today's recipe)."""
     if not isinstance(recipe, dict):
         return "today's recipe"
+    recipe = json.loads(json.dumps(Recipe.from_record(recipe).as_dict()))
     default = json.loads(json.dumps(Recipe().as_dict()))
-    kicks = ("kick_max", "kick_interval") if recipe.get("push_kind") == "kick" else ()
+    kicks = recipe["push_kind"] == "kick"  # a kick's size, draw and interval are named; without kicks, none
     options = []
-    for key in (k for k, v in recipe.items() if default.get(k) != v or k in kicks):
+    for key in (k for k, v in recipe.items() if (kicks or not k.startswith("kick_"))
+                and (default[k] != v or (kicks and k.startswith("kick_")))):
         value, option = recipe[key], f"--{key.replace('_', '-')}"
         if value is True:
             options.append(option)

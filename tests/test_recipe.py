@@ -13,6 +13,7 @@ from cli_runner import gaitlib_quick
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
+from gaitlib.envs.randomization import PushConfig, PushSchedule
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import clip_from_description, get_gait
 from gaitlib.library import Library
@@ -44,6 +45,36 @@ def test_a_kick_changes_the_trunks_speed_by_the_drawn_amount() -> None:
         assert cfg.pushes.duration == (sim.control_dt, sim.control_dt) and cfg.pushes.interval == (0.1, 0.1)
     finally:
         sim.close()
+
+
+def test_kicks_are_drawn_per_axis_as_the_field_draws_them() -> None:
+    """``axes`` (the default): each horizontal axis uniform in +-max, so about 1 - pi/4 of the kicks are larger than
+    max and none beyond sqrt(2) max; ``disk``: a random direction with a magnitude of at most max."""
+    pushes = {}
+    for draw in ("axes", "disk"):
+        cfg = Recipe(push_kind="kick", kick_draw=draw).env_config(EnvConfig(), control_dt=1 / 30).pushes
+        assert cfg.draw == draw
+        generator = torch.Generator().manual_seed(0)
+        schedule = PushSchedule(dataclasses.replace(cfg, max_force=1.0), 20_000, 1 / 30, generator)
+        schedule._steps_left[:] = 1  # every world's kick is due at the next step
+        schedule.advance()
+        pushes[draw] = schedule.force
+    axes, disk = pushes["axes"], pushes["disk"]
+    assert axes[:, :2].abs().max() <= 1.0 and (axes[:, 2] == 0).all()
+    assert (axes[:, :2] < -0.9).any(0).all() and (axes[:, :2] > 0.9).any(0).all()
+    beyond = (axes.norm(dim=1) > 1.0).float().mean()
+    assert beyond == pytest.approx(1 - torch.pi / 4, abs=0.02)
+    assert disk.norm(dim=1).max() <= 1.0 + 1e-6 and disk.norm(dim=1).mean() == pytest.approx(0.5, abs=0.02)
+    with pytest.raises(ValueError, match="fixed_force with 'disk' only"):
+        PushConfig(max_force=1.0, fixed_force=True, draw="axes")
+
+
+def test_a_recipe_recorded_before_the_kick_draw_existed_reads_as_the_disk() -> None:
+    recorded = {"push_kind": "kick", "kick_max": 1.0, "kick_interval": [1.0, 3.0], "terminate": "contact",
+                "contact_penalty": 0.0, "gamma": None, "lam": None, "action_delay": None, "critic_delay": False}
+    assert Recipe.from_record(recorded) == Recipe(push_kind="kick", kick_draw="disk")
+    recipe = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0)
+    assert Recipe.from_record(json.loads(json.dumps(recipe.as_dict()))) == recipe
 
 
 def test_trunk_only_terminations_ride_a_touch_through_and_the_penalty_costs_reward() -> None:
@@ -84,8 +115,9 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
     )
     assert trained.returncode == 0, trained.stderr
     training = json.loads((library / "stand" / "metadata.json").read_text())["training"]
-    assert training["recipe"] == {"push_kind": "kick", "kick_max": 0.5, "kick_interval": [1.0, 2.0],
-                                  "terminate": "trunk", "contact_penalty": 0.2, "gamma": 0.99, "lam": 0.9,
+    assert training["recipe"] == {"push_kind": "kick", "kick_max": 0.5, "kick_draw": "axes",
+                                  "kick_interval": [1.0, 2.0], "terminate": "trunk", "contact_penalty": 0.2,
+                                  "gamma": 0.99, "lam": 0.9,
                                   "action_delay": 1, "critic_delay": True}
     assert training["preset"]["gamma"] == 0.99 and training["preset"]["lam"] == 0.9
     assert training["randomization"]["action_delay_steps"] == [1, 1]
@@ -103,6 +135,7 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
     [
         ({"push_kind": "shove"}, "--push-kind takes force or kick, got 'shove'"),
         ({"terminate": "legs"}, "--terminate takes trunk or contact, got 'legs'"),
+        ({"kick_draw": "ring"}, "--kick-draw takes disk or axes, got 'ring'"),
         ({"kick_interval": (3.0, 1.0)}, "--kick-interval LOW:HIGH with 0 < LOW <= HIGH <= 60 s"),
         ({"contact_penalty": -1.0}, "--contact-penalty must lie in [0, 10] per step, got -1"),
         ({"gamma": 0.0}, "--gamma must lie in (0, 1], got 0"),

@@ -282,8 +282,13 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
                                                         "result": kick}))
     made = _flat(robustness.robustness_table(folder))
     assert made.index("| pace, today |") < made.index("| pace, kick |") < made.index("| trot, today |")
-    assert "- pace, kick: `--push-kind kick --kick-max 1 --kick-interval 1:3 --terminate trunk --contact-penalty 1 " \
-           "--gamma 0.99`, 1,500 iterations" in made
+    assert "- pace, kick: `--push-kind kick --kick-max 1 --kick-draw axes --kick-interval 1:3 --terminate trunk " \
+           "--contact-penalty 1 --gamma 0.99`, 1,500 iterations" in made
+    del kick["recipe"]["kick_draw"]  # recorded before kicks could be drawn per axis: the disk, named
+    (folder / "pace-kick.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
+                                                        "result": kick}))
+    made = _flat(robustness.robustness_table(folder))
+    assert "- pace, kick: `--push-kind kick --kick-max 1 --kick-draw disk --kick-interval 1:3 --terminate" in made
     assert "pace, kick: meets 4 of the 4 bars (single shove, pushes up to 50 N, 0 N, one step late)." in made
 
 

@@ -86,10 +86,14 @@ def train_command(
     ),
     push_kind: str = typer.Option(
         "force", "--push-kind", help="Training pushes: force (the paper's, up to the preset's largest force, 0.1-0.3 s "
-        "every 1-3 s) or kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, --kick-interval)."
+        "every 1-3 s) or kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, --kick-draw, --kick-interval)."
     ),
     kick_max: float = bounded(1.0, "--kick-max", help="With --push-kind kick: the largest change of speed a kick "
-                              "gives;", bounds=Bounds(low=0, high=5, unit="m/s")),
+                              "gives along each axis (axes) or in all (disk);",
+                              bounds=Bounds(low=0, high=5, unit="m/s")),
+    kick_draw: str = typer.Option("axes", "--kick-draw", help="With --push-kind kick: axes (each horizontal axis "
+                                  "uniform in +-kick-max: legged_gym's and Isaac Lab's) or disk (a random direction, "
+                                  "the magnitude uniform in 0-kick-max)."),
     kick_interval: str = typer.Option("1:3", "--kick-interval", help="With --push-kind kick: the quiet time before "
                                       "each kick, LOW:HIGH s, in (0, 60]."),
     terminate: str = typer.Option(
@@ -126,9 +130,9 @@ def train_command(
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
-    recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_interval=_interval(kick_interval),
-                    terminate=terminate, contact_penalty=contact_penalty, gamma=gamma, lam=lam,
-                    action_delay=action_delay, critic_delay=critic_delay)
+    recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_draw=kick_draw,
+                    kick_interval=_interval(kick_interval), terminate=terminate, contact_penalty=contact_penalty,
+                    gamma=gamma, lam=lam, action_delay=action_delay, critic_delay=critic_delay)
     chosen = recipe.preset(get_preset(preset))
     target, copy_from = writing_target(library)
     plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from, states=states)

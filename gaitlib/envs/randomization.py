@@ -8,7 +8,9 @@ import torch
 
 from gaitlib.robots.a1.constants import FOOT_FRICTION, KD_DEFAULT, KD_RANGE, KP_DEFAULT, KP_RANGE
 
-__all__ = ["PushConfig", "PushSchedule", "RandomizationConfig", "WorldParameters", "sample_world_parameters"]
+__all__ = [
+    "PUSH_DRAWS", "PushConfig", "PushSchedule", "RandomizationConfig", "WorldParameters", "sample_world_parameters",
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,16 +91,30 @@ the mean of :data:`DISTURBANCE_INTERVAL_S`, so the first push starts between 0.4
 request and a strategy meets the robot in every state of a push (under way, just over, about to come)."""
 
 
+PUSH_DRAWS = ("disk", "axes")
+"""How a push's horizontal force is drawn (:attr:`PushConfig.draw`)."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class PushConfig:
     """Random horizontal pushes on the trunk: random direction, magnitude, duration and interval."""
 
     max_force: float = 0.0
-    """Largest push magnitude, N; magnitudes are uniform in [0, max_force]. 0 disables pushes."""
+    """Largest push, N (0 disables pushes): the magnitude's bound with the ``disk`` draw, each horizontal axis's with
+    ``axes``."""
     fixed_force: bool = False
-    """Push with exactly ``max_force`` every time (the benchmark's fixed magnitudes) instead of a uniform draw."""
+    """Push with exactly ``max_force`` every time (the benchmark's fixed magnitudes) instead of a uniform draw (the
+    ``disk`` draw only)."""
+    draw: str = "disk"
+    """``disk``: a random direction, the magnitude uniform in [0, max_force] (the paper's pushes); ``axes``: each
+    horizontal axis uniform in [-max_force, max_force], as legged_gym (``push_robots``) and Isaac Lab
+    (``push_by_setting_velocity``) draw their velocity kicks."""
     duration: tuple[float, float] = (0.1, 0.3)  # paper: pushes last 0.1-0.3 s
     interval: tuple[float, float] = (1.0, 3.0)  # choice: quiet time between pushes, s
+
+    def __post_init__(self) -> None:
+        if self.draw not in PUSH_DRAWS or (self.fixed_force and self.draw != "disk"):
+            raise ValueError(f"pushes: draw is one of {PUSH_DRAWS} (fixed_force with 'disk' only), got '{self.draw}'")
 
 
 class PushSchedule:
@@ -136,6 +152,18 @@ class PushSchedule:
         self._pushing[world_ids] = False
         self._steps_left[world_ids] = self._steps(self.cfg.interval, len(world_ids))
 
+    def _draw(self, k: int) -> torch.Tensor:
+        """(k, 3) horizontal forces of ``k`` new pushes, N (:attr:`PushConfig.draw`)."""
+        if self.cfg.draw == "axes":
+            xy = self.cfg.max_force * (2 * torch.rand(k, 2, generator=self._gen) - 1)
+            return torch.cat([xy, torch.zeros(k, 1)], 1)
+        angle = 2 * torch.pi * torch.rand(k, generator=self._gen)
+        if self.cfg.fixed_force:
+            magnitude = torch.full((k,), self.cfg.max_force)
+        else:
+            magnitude = self.cfg.max_force * torch.rand(k, generator=self._gen)
+        return torch.stack([magnitude * torch.cos(angle), magnitude * torch.sin(angle), 0 * angle], 1)
+
     def advance(self) -> torch.Tensor:
         """Move the timers on by one control step; return the ids of worlds whose force changed."""
         if self.cfg.max_force <= 0.0:
@@ -149,13 +177,7 @@ class PushSchedule:
         self.force[stop] = 0.0
         self._pushing[stop] = False
         self._steps_left[stop] = self._steps(self.cfg.interval, len(stop))
-        k = len(start)
-        angle = 2 * torch.pi * torch.rand(k, generator=self._gen)
-        if self.cfg.fixed_force:
-            magnitude = torch.full((k,), self.cfg.max_force)
-        else:
-            magnitude = self.cfg.max_force * torch.rand(k, generator=self._gen)
-        self.force[start] = torch.stack([magnitude * torch.cos(angle), magnitude * torch.sin(angle), 0 * angle], 1)
+        self.force[start] = self._draw(len(start))
         self._pushing[start] = True
-        self._steps_left[start] = self._steps(self.cfg.duration, k)
+        self._steps_left[start] = self._steps(self.cfg.duration, len(start))
         return due

@@ -4,11 +4,14 @@ option of ``gaitlib train`` and is recorded in the entry's metadata (``training.
 
 The field's practice each lever follows:
 
-- pushes as velocity kicks: legged_gym sets the base's horizontal velocity to a random value of up to 1 m/s every
-  15 s (``push_robots``, ``max_push_vel_xy = 1.``, github.com/leggedrobotics/legged_gym ``legged_robot_config.py``);
-  mjlab adds up to 0.5 m/s every 1-3 s. Here a kick is a horizontal force held for one control step whose impulse
-  gives the nominal A1 (:data:`~gaitlib.robots.a1.constants.TOTAL_MASS`) the drawn change of speed; a world whose
-  mass is randomized heavier or lighter changes speed by that much less or more.
+- pushes as velocity kicks: legged_gym sets the base's horizontal velocity to a random value of up to 1 m/s along
+  each axis every 15 s (``push_robots``, ``max_push_vel_xy = 1.``, github.com/leggedrobotics/legged_gym
+  ``legged_robot_config.py``); Isaac Lab's ``push_by_setting_velocity`` adds a velocity drawn per axis, mjlab up to
+  0.5 m/s every 1-3 s. Here a kick's change of speed is drawn the same way, per axis (its magnitude up to
+  sqrt(2) ``kick_max``; ``--kick-draw disk`` draws a random direction and a magnitude of up to ``kick_max``). A kick
+  is a horizontal force held for one control step whose impulse gives the nominal A1
+  (:data:`~gaitlib.robots.a1.constants.TOTAL_MASS`) the drawn change of speed; a world whose mass is randomized
+  heavier or lighter changes speed by that much less or more.
 - terminations on the trunk only (legged_gym's ``terminate_after_contacts_on = ["base"]``), a leg's touch then
   penalized per control step (legged_gym's ``penalize_contacts_on = ["thigh", "calf"]``, ``collision`` scale -1).
 - the discount: rsl-rl's locomotion tasks use 0.99 (lambda 0.95) against the paper's 0.95 (lambda 0.95), a horizon
@@ -25,13 +28,15 @@ from dataclasses import dataclass
 
 from gaitlib.defaults import FALL_DEFINITIONS
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.randomization import PUSH_DRAWS, PushConfig
 from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.robots.a1.constants import TOTAL_MASS
 from gaitlib.training.presets import TrainPreset
 
 __all__ = ["PUSH_KINDS", "Recipe"]
+
+_KICK_DRAW_BEFORE_ITS_OPTION = "disk"  # entries recorded before kicks could be drawn per axis drew them so
 
 PUSH_KINDS = ("force", "kick")
 """``force``: the paper's pushes (up to the preset's largest force, 0.1-0.3 s, every 1-3 s); ``kick``: velocity
@@ -45,7 +50,11 @@ class Recipe:
     push_kind: str = "force"
     """``force`` (the paper's pushes, up to the preset's ``push_max`` N) or ``kick`` (velocity kicks)."""
     kick_max: float = 1.0
-    """With ``kick``: the largest change of horizontal speed a kick gives, m/s (legged_gym: 1.0)."""
+    """With ``kick``: the largest change of speed a kick gives along each horizontal axis (``axes``) or in all
+    (``disk``), m/s (legged_gym: 1.0 per axis)."""
+    kick_draw: str = "axes"
+    """With ``kick``: ``axes`` (each horizontal axis uniform in [-kick_max, kick_max], the field's way) or ``disk``
+    (a random direction, the magnitude uniform in [0, kick_max])."""
     kick_interval: tuple[float, float] = (1.0, 3.0)
     """With ``kick``: the quiet time before each kick, uniform in this range, s (mjlab: 1-3; legged_gym: 15)."""
     terminate: str = "contact"
@@ -69,6 +78,8 @@ class Recipe:
             raise GaitlibError(f"--push-kind takes {' or '.join(PUSH_KINDS)}, got '{self.push_kind}'")
         if self.terminate not in FALL_DEFINITIONS:
             raise GaitlibError(f"--terminate takes {' or '.join(FALL_DEFINITIONS)}, got '{self.terminate}'")
+        if self.kick_draw not in PUSH_DRAWS:
+            raise GaitlibError(f"--kick-draw takes {' or '.join(PUSH_DRAWS)}, got '{self.kick_draw}'")
         low, high = self.kick_interval
         if not (math.isfinite(self.kick_max) and 0 <= self.kick_max <= 5 and 0 < low <= high <= 60):
             raise GaitlibError("kicks: --kick-max in [0, 5] m/s, --kick-interval LOW:HIGH with 0 < LOW <= HIGH <= 60 s")
@@ -91,7 +102,8 @@ class Recipe:
         contact penalty and action delay."""
         pushes = PushConfig(max_force=0.0)
         if self.push_kind == "kick":
-            pushes = PushConfig(max_force=0.0, duration=(control_dt, control_dt), interval=self.kick_interval)
+            pushes = PushConfig(max_force=0.0, duration=(control_dt, control_dt), interval=self.kick_interval,
+                                draw=self.kick_draw)
         randomization = cfg.randomization
         if self.action_delay is not None:
             randomization = dataclasses.replace(randomization, action_delay_steps=(self.action_delay,) * 2)
@@ -104,7 +116,7 @@ class Recipe:
     def push_limit(self, preset: TrainPreset, iteration: int, iterations: int, *, control_dt: float) -> float:
         """The largest push force during ``iteration`` of a run of ``iterations``, N: the preset's curriculum for
         ``force``; for ``kick``, the force that gives the nominal A1 the curriculum's share of :attr:`kick_max` in one
-        control step."""
+        control step (per axis with the ``axes`` draw)."""
         if self.push_kind == "force":
             return preset.push_limit(iteration, iterations)
         return TOTAL_MASS * self.kick_max * preset.push_share(iteration, iterations) / control_dt
@@ -112,3 +124,9 @@ class Recipe:
     def as_dict(self) -> dict:
         """What the entry's metadata records."""
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_record(cls, record: dict) -> Recipe:
+        """The recipe an entry's metadata records (:meth:`as_dict`), also one recorded before ``kick_draw``."""
+        fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, **record}
+        return cls(**{**fields, "kick_interval": tuple(fields.get("kick_interval", cls.kick_interval))})
