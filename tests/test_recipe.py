@@ -69,11 +69,11 @@ def test_kicks_are_drawn_per_axis_as_the_field_draws_them() -> None:
         PushConfig(max_force=1.0, fixed_force=True, draw="axes")
 
 
-def test_a_recipe_recorded_before_the_kick_draw_existed_reads_as_the_disk() -> None:
+def test_a_recipe_recorded_before_the_kick_draw_and_cycle_sync_existed_reads_as_it_was_trained() -> None:
     recorded = {"push_kind": "kick", "kick_max": 1.0, "kick_interval": [1.0, 3.0], "terminate": "contact",
                 "contact_penalty": 0.0, "gamma": None, "lam": None, "action_delay": None, "critic_delay": False}
-    assert Recipe.from_record(recorded) == Recipe(push_kind="kick", kick_draw="disk")
-    recipe = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0)
+    assert Recipe.from_record(recorded) == Recipe(push_kind="kick", kick_draw="disk", cycle_sync=False)
+    recipe = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0, cycle_sync=True)
     assert Recipe.from_record(json.loads(json.dumps(recipe.as_dict()))) == recipe
 
 
@@ -105,20 +105,54 @@ def test_trunk_only_terminations_ride_a_touch_through_and_the_penalty_costs_rewa
     assert rewards[("trunk", 0.5)] == pytest.approx(rewards[("trunk", 0.0)] - 0.5, abs=1e-5)
 
 
+def test_cycle_sync_forgives_a_displacement_at_the_next_cycle_and_only_then() -> None:
+    """A standing robot whose reference is anchored 0.4 m away (as after a shove) loses the trunk-position reward;
+    with cycle sync the reference moves to the robot at the next cycle start, its heading kept; without, never."""
+    clip = clip_from_description(get_gait("stand"))
+    root_pose = {}
+    for sync in (False, True):
+        sim = make_backend("mujoco", num_worlds=1)
+        try:
+            cfg = Recipe(cycle_sync=sync, action_delay=0).env_config(EnvConfig(episode_seconds=5.0),
+                                                                      control_dt=sim.control_dt)
+            cfg = dataclasses.replace(cfg, randomization=dataclasses.replace(cfg.randomization, enabled=False),
+                                      random_start_phase=False)
+            env = ImitationEnv(sim, [clip], cfg, seed=0)
+            env.step(torch.zeros(1, 12))
+            env.reference.start(torch.arange(1), torch.zeros(1, dtype=torch.long), env.reference.phase.clone(),
+                                env.sim_state.root_pos + torch.tensor([[0.4, 0.0, 0.0]]), env.sim_state.root_quat)
+            yaw = float(env.reference.frame().root_quat[0, 0])
+            values, synced_at = [], None
+            for step in range(round(1.3 / (clip.phase_rate * env.dt))):  # 1.3 cycles
+                before = float(env.reference.phase[0])
+                env.step(torch.zeros(1, 12))
+                values.append(float(env._terms["root_pose"][0]))
+                if synced_at is None and int(env.reference.phase[0]) > int(before):
+                    synced_at = step
+                    gap = env.reference.frame().root_pos[0, :2] - env.sim_state.root_pos[0, :2]
+                    assert (gap.norm() < 1e-5) == sync
+            assert synced_at is not None and float(env.reference.frame().root_quat[0, 0]) == pytest.approx(yaw)
+            root_pose[sync] = (max(values[:synced_at]), min(values[synced_at:]))
+        finally:
+            sim.close()
+    assert root_pose[False][1] < 0.1 and root_pose[True][0] < 0.1  # both displaced until the cycle starts
+    assert root_pose[True][1] > 0.5  # then only the synced one is near its reference again
+
+
 def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
     library = tmp_path / "library"
     trained = gaitlib_quick(
         "train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--backend", "mujoco",
         "--library", str(library), "--run-dir", str(tmp_path / "runs"), "--push-kind", "kick", "--kick-max", "0.5",
         "--kick-interval", "1:2", "--terminate", "trunk", "--contact-penalty", "0.2", "--gamma", "0.99",
-        "--lam", "0.9", "--action-delay", "1", "--critic-delay",
+        "--lam", "0.9", "--action-delay", "1", "--critic-delay", "--cycle-sync",
     )
     assert trained.returncode == 0, trained.stderr
     training = json.loads((library / "stand" / "metadata.json").read_text())["training"]
     assert training["recipe"] == {"push_kind": "kick", "kick_max": 0.5, "kick_draw": "axes",
                                   "kick_interval": [1.0, 2.0], "terminate": "trunk", "contact_penalty": 0.2,
                                   "gamma": 0.99, "lam": 0.9,
-                                  "action_delay": 1, "critic_delay": True}
+                                  "action_delay": 1, "critic_delay": True, "cycle_sync": True}
     assert training["preset"]["gamma"] == 0.99 and training["preset"]["lam"] == 0.9
     assert training["randomization"]["action_delay_steps"] == [1, 1]
     entry = Library(library).entry("stand")  # the critic reads the delay after the other privileged extras

@@ -111,10 +111,13 @@ def train_command(
                                        bounds=Bounds(low=0, high=3, whole=True)),
     critic_delay: bool = typer.Option(False, "--critic-delay", help="The critic sees each world's action delay "
                                       "(privileged; the actor does not)."),
+    cycle_sync: bool = typer.Option(False, "--cycle-sync", help="At the start of every gait cycle, re-anchor the "
+                                    "reference horizontally where the robot is (Peng et al.'s cycle sync; the "
+                                    "reward only)."),
 ) -> None:
     """Train one gait policy with PPO and write it into a library (other gaits are never touched; the shipped
     library only with --replace). The recipe's robustness levers (--push-kind, --terminate, --contact-penalty,
-    --gamma, --lam, --action-delay, --critic-delay) are recorded in the entry's metadata."""
+    --gamma, --lam, --action-delay, --critic-delay, --cycle-sync) are recorded in the entry's metadata."""
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
@@ -132,7 +135,8 @@ def train_command(
     description = _description(gait, gait_file)
     recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_draw=kick_draw,
                     kick_interval=_interval(kick_interval), terminate=terminate, contact_penalty=contact_penalty,
-                    gamma=gamma, lam=lam, action_delay=action_delay, critic_delay=critic_delay)
+                    gamma=gamma, lam=lam, action_delay=action_delay, critic_delay=critic_delay,
+                    cycle_sync=cycle_sync)
     chosen = recipe.preset(get_preset(preset))
     target, copy_from = writing_target(library)
     plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from, states=states)

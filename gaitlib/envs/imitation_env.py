@@ -68,6 +68,11 @@ class EnvConfig:
     contact_penalty: float = 0.0
     """Reward taken off per control step while a non-foot body touches the ground (training with trunk-only
     terminations: :mod:`gaitlib.training.recipe`); 0: none."""
+    cycle_sync: bool = False
+    """At the start of each gait cycle, move the reference's trunk horizontally to where the robot's is (its heading
+    stays): the reward's trunk-position term then measures the drift within one cycle, not since the episode began
+    (Peng et al. 2020's code, ``enable_cycle_sync``). The actor observes no horizontal position, so this changes
+    the reward only."""
 
 
 class ImitationEnv(VecEnv):
@@ -140,9 +145,12 @@ class ImitationEnv(VecEnv):
         if len(changed):
             self.backend.set_trunk_force(changed, self._pushes.force[changed].to(self.device))
         diverged = self.backend.step().to(self.device)
-        self.reference.advance(self.dt)
+        cycle_started = self.reference.advance(self.dt)
         self.episode_length_buf += 1
         self._state = state = self.backend.state()
+        if cfg.cycle_sync and bool(cycle_started.any()):
+            synced = cycle_started.nonzero().squeeze(1)
+            self.reference.sync_position(synced, state.root_pos[synced])
 
         observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
         ref = observed[0]

@@ -55,9 +55,20 @@ class ReferenceTracker:
         """(N,) phase in [0, 1)."""
         return torch.remainder(self.phase, 1.0)
 
-    def advance(self, dt: float) -> None:
-        """Move every world's phase on by ``dt`` seconds."""
+    def advance(self, dt: float) -> torch.Tensor:
+        """Move every world's phase on by ``dt`` seconds; return the (N,) bool mask of the worlds whose phase passed
+        the start of a cycle."""
+        before = torch.floor(self.phase)
         self.phase += dt * self._rate[self.gait]
+        return torch.floor(self.phase) > before
+
+    def sync_position(self, world_ids: torch.Tensor, root_pos: torch.Tensor) -> None:
+        """Move the anchor of ``world_ids`` horizontally so that the reference's trunk is at the robot's ``root_pos``
+        (k, 3) now; its heading stays (Peng et al.'s cycle sync, ``_sync_ref_origin`` with the root position only)."""
+        clip = self._clip_frames(self.gait[world_ids], self.phase[world_ids])
+        offset = root_pos - quat_rotate(quat_from_yaw(self._yaw[world_ids]), clip.root_pos)
+        offset[:, 2] = 0.0
+        self._offset[world_ids] = offset
 
     def start(
         self,

@@ -77,7 +77,7 @@ _RECIPE = record(
         "contact_penalty": number(), "gamma": number(0, 1, nullable=True), "lam": number(0, 1, nullable=True),
         "action_delay": number(0, 10, whole=True, nullable=True), "critic_delay": flag(),
     },
-    {"kick_draw": text()},  # recorded since kicks could be drawn per axis
+    {"kick_draw": text(), "cycle_sync": flag()},  # recorded since these levers existed
     extra=plain(),
 )
 _SWITCH_START = record(

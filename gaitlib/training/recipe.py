@@ -18,6 +18,11 @@ The field's practice each lever follows:
   of about 0.7 s at 30 Hz, shorter than a fall takes to unfold.
 - the action delay: trained at a fixed number of control steps instead of Table 1's random 0-1, or known to the
   critic (privileged, as mjlab's motion-tracking task gives its critic state the actor lacks).
+- the imitation reward's tolerance after a shove: the reference re-anchored horizontally where the robot is at the
+  start of every gait cycle, as Peng et al. 2020's code does by default (``ImitationTask(enable_cycle_sync=True)``,
+  github.com/google-research/motion_imitation). Without it the trunk-position term compares against a track
+  anchored where the episode began, so a shove's displacement costs reward for the rest of the episode, though
+  neither the actor nor the critic observes a horizontal position.
 """
 
 from __future__ import annotations
@@ -72,6 +77,9 @@ class Recipe:
     critic_delay: bool = False
     """The critic sees each world's action delay (privileged; the actor does not): the value of a state no longer
     averages over delays the policy cannot observe."""
+    cycle_sync: bool = False
+    """The reference's trunk re-anchored horizontally where the robot's is at the start of every gait cycle
+    (:attr:`gaitlib.envs.EnvConfig.cycle_sync`; the reward only)."""
 
     def __post_init__(self) -> None:
         if self.push_kind not in PUSH_KINDS:
@@ -99,7 +107,7 @@ class Recipe:
 
     def env_config(self, cfg: EnvConfig, *, control_dt: float) -> EnvConfig:
         """``cfg`` with this recipe's pushes (off: the curriculum raises them, :meth:`push_limit`), terminations,
-        contact penalty and action delay."""
+        contact penalty, action delay and cycle sync."""
         pushes = PushConfig(max_force=0.0)
         if self.push_kind == "kick":
             pushes = PushConfig(max_force=0.0, duration=(control_dt, control_dt), interval=self.kick_interval,
@@ -109,7 +117,7 @@ class Recipe:
             randomization = dataclasses.replace(randomization, action_delay_steps=(self.action_delay,) * 2)
         return dataclasses.replace(
             cfg, pushes=pushes, termination=TerminationConfig().counting(self.terminate),
-            contact_penalty=self.contact_penalty, randomization=randomization,
+            contact_penalty=self.contact_penalty, randomization=randomization, cycle_sync=self.cycle_sync,
             observation=dataclasses.replace(cfg.observation, critic_delay=self.critic_delay),
         )
 
@@ -127,6 +135,7 @@ class Recipe:
 
     @classmethod
     def from_record(cls, record: dict) -> Recipe:
-        """The recipe an entry's metadata records (:meth:`as_dict`), also one recorded before ``kick_draw``."""
-        fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, **record}
+        """The recipe an entry's metadata records (:meth:`as_dict`), also one recorded before ``kick_draw`` and
+        ``cycle_sync`` existed."""
+        fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, "cycle_sync": False, **record}
         return cls(**{**fields, "kick_interval": tuple(fields.get("kick_interval", cls.kick_interval))})
