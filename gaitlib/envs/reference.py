@@ -66,9 +66,7 @@ class ReferenceTracker:
         """Move the anchor of ``world_ids`` horizontally so that the reference's trunk is at the robot's ``root_pos``
         (k, 3) now; its heading stays (Peng et al.'s cycle sync, ``_sync_ref_origin`` with the root position only)."""
         clip = self._clip_frames(self.gait[world_ids], self.phase[world_ids])
-        offset = root_pos - quat_rotate(quat_from_yaw(self._yaw[world_ids]), clip.root_pos)
-        offset[:, 2] = 0.0
-        self._offset[world_ids] = offset
+        self._anchor(world_ids, self._yaw[world_ids], clip.root_pos, root_pos)
 
     def start(
         self,
@@ -83,9 +81,13 @@ class ReferenceTracker:
         self.gait[world_ids] = gait
         self.phase[world_ids] = phase
         clip = self._clip_frames(gait, phase)
-        yaw = yaw_of(root_quat) - yaw_of(clip.root_quat)
-        rotated = quat_rotate(quat_from_yaw(yaw), clip.root_pos)
-        offset = root_pos - rotated
+        self._anchor(world_ids, yaw_of(root_quat) - yaw_of(clip.root_quat), clip.root_pos, root_pos)
+
+    def _anchor(self, world_ids: torch.Tensor, yaw: torch.Tensor, clip_root_pos: torch.Tensor,
+                root_pos: torch.Tensor) -> None:
+        """Anchor ``world_ids`` turned by ``yaw`` (k,) rad so that the clip's trunk at ``clip_root_pos`` (k, 3) lies
+        horizontally at ``root_pos`` (k, 3)."""
+        offset = root_pos - quat_rotate(quat_from_yaw(yaw), clip_root_pos)
         offset[:, 2] = 0.0
         self._offset[world_ids] = offset
         self._yaw[world_ids] = yaw
