@@ -24,7 +24,7 @@ from gaitlib.training.trainer import TrainRequest, train_gait
 
 VARIANTS = {
     "today": Recipe(),
-    "kick": Recipe(push_kind="kick", kick_max=1.0, kick_interval=(1.0, 3.0)),
+    "kick": Recipe(push_kind="kick", kick_max=1.0, kick_draw="disk", kick_interval=(1.0, 3.0)),  # as measured
     "trunk": Recipe(terminate="trunk", contact_penalty=1.0),
     "gamma": Recipe(gamma=0.99, lam=0.95),
     "critic-delay": Recipe(critic_delay=True),
