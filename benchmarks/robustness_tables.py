@@ -160,8 +160,7 @@ def recipe_options(recipe: dict | str) -> str:
     default = json.loads(json.dumps(Recipe().as_dict()))
     kicks = recipe["push_kind"] == "kick"  # a kick's size, draw and interval are named; without kicks, none
     options = []
-    for key in (k for k, v in recipe.items() if (kicks or not k.startswith("kick_"))
-                and (default[k] != v or (kicks and k.startswith("kick_")))):
+    for key in (k for k, v in recipe.items() if (kicks if k.startswith("kick_") else default[k] != v)):
         value, option = recipe[key], f"--{key.replace('_', '-')}"
         if value is True:
             options.append(option)
