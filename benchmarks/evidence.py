@@ -9,7 +9,7 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 __all__ = [
-    "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite", "groups_at", "interval", "not_yet", "pct",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite", "groups_at", "interval", "not_yet", "pct",
     "read_evidence", "settings_line", "shown",
 ]
 
@@ -19,6 +19,9 @@ EVIDENCE = ROOT / "docs" / "results" / "library"
 """The stored raw results of the shipped library."""
 GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
 """The shipped gaits, in the order the tables list them."""
+BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
+"""The quality bar: falls in at most 1% of episodes, speed within 10% of the reference, median heading change at
+most 15 degrees."""
 STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
 """Column order of the strategies in a switching table."""
 

@@ -247,8 +247,9 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
     command = "python benchmarks/robust_ablation.py --gait pace --states data/states-0n.npz --out pace-today.json"
     (folder / "pace-today.json").write_text(json.dumps({"command": command, "result": pace}))
     made = _flat(robustness.robustness_table(folder))
-    assert "pace, today: meets 2 of the 4 bars (pushes up to 50 N, 0 N); misses single shove: 1.6% in the left " \
-           "direction (4 of 256) at 12 N s; one step late: 2.9%." in made
+    assert "pace, today: meets 5 of the 7 bars (pushes up to 50 N, 0 N, touches at 0 N, speed within 10%, heading " \
+           "within 15 deg); misses single shove: 1.6% in the left direction (4 of 256) at 12 N s; one step late: " \
+           "2.9%." in made
     assert f"Not yet measured: `{folder / 'trot-today.json'}` not stored yet." in made
     assert f"`{folder / 'pace-today.json'}` (made 2026-12-04): `{command}`" in made  # the row's own date
     # the trot: 2 of 256 in every direction at 12 N s (0.8%) meets the shove's bar; 2.9% under pushes misses its own
@@ -259,8 +260,8 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
     body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robustness-gaits"]
     assert _prose_fits(body) and "Not yet measured" not in body
     made = _flat(body)
-    assert "trot, today: meets 3 of the 4 bars (single shove, 0 N, one step late); misses pushes up to 50 N: 2.9%." \
-           in made
+    assert "trot, today: meets 6 of the 7 bars (single shove, 0 N, one step late, touches at 0 N, speed within " \
+           "10%, heading within 15 deg); misses pushes up to 50 N: 2.9%." in made
     header = next(line for line in body.splitlines() if line.startswith("| gait, recipe | shove 6 N s [95%] | worst"))
     assert header.endswith("| switch in from trot [95%] | switch in from stand [95%] | switch in from pace [95%] |")
     shove = f"0.4 {_interval(4, 1024)} | left 4/256"
@@ -289,7 +290,25 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
                                                         "result": kick}))
     made = _flat(robustness.robustness_table(folder))
     assert "- pace, kick: `--push-kind kick --kick-max 1 --kick-draw disk --kick-interval 1:3 --terminate" in made
-    assert "pace, kick: meets 4 of the 4 bars (single shove, pushes up to 50 N, 0 N, one step late)." in made
+    assert "pace, kick: meets 7 of the 7 bars (single shove, pushes up to 50 N, 0 N, one step late, touches at 0 N, " \
+           "speed within 10%, heading within 15 deg)." in made
+    # its legs touching at 0 N in 60 of 1,024 episodes, past today's 3 of 1,024 with both intervals; a heading off
+    kick["figures"]["zero_n"] = _run(0, touches=60) | {"median_heading_change_deg": 16.4}
+    (folder / "pace-kick.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
+                                                        "result": kick}))
+    made = _flat(robustness.robustness_table(folder))
+    assert f"pace, kick: meets 5 of the 7 bars (single shove, pushes up to 50 N, 0 N, one step late, speed within " \
+           f"10%); misses touches at 0 N: 5.9% {_interval(60, 1024)} against today's 0.3% {_interval(3, 1024)}; " \
+           "heading within 15 deg: 16.4 deg." in made
+    # a gait without today's row stored is not judged on its touches
+    (folder / "trot-today.json").unlink()
+    trot = _ablation("trot", ("pace", "stand"), shove=dict.fromkeys(("front", "left", "back", "right"), 0), push=0,
+                     zero=0, late=0, minutes=40.0)
+    (folder / "trot-kick.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait trot",
+                                                        "result": trot}))
+    made = _flat(robustness.robustness_table(folder))
+    assert "trot, kick: meets 6 of the 6 bars (single shove, pushes up to 50 N, 0 N, one step late, speed within " \
+           "10%, heading within 15 deg)." in made
 
 
 def _interval(count: int, total: int) -> str:
