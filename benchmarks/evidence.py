@@ -9,8 +9,8 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite", "groups_at", "interval", "not_yet", "pct",
-    "read_evidence", "settings_line", "shown",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite",
+    "groups_at", "interval", "not_yet", "pct", "read_evidence", "settings_line", "shown",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]

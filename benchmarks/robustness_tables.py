@@ -38,8 +38,8 @@ from gaitlib.stats import wilson_interval
 from gaitlib.training.recipe import Recipe
 
 __all__ = [
-    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "GAIT_BARS", "SHOVES", "ablation_rows", "misses", "pushed_table",
-    "read_row", "recipe_options", "robustness_table", "shove_table",
+    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "GAIT_BARS", "SHOVES", "ablation_rows", "misses",
+    "pushed_table", "read_row", "recipe_options", "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
@@ -107,7 +107,7 @@ def _shove_miss(figures: dict) -> str | None:
 
 def _bars(today: dict | None) -> list[str]:
     """The bars a row is judged against: touches only where today's row of its gait is stored."""
-    return [*BARS, *(b for b in GAIT_BARS if today is not None or b != GAIT_BARS[0])]
+    return [*BARS, *(GAIT_BARS if today is not None else GAIT_BARS[1:])]
 
 
 def misses(row: dict, today: dict | None = None) -> dict[str, str]:
@@ -236,7 +236,7 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
              f"{pct(BARS['one step late'])}% one step late; at 0 N, the legs touching the ground in no more episodes "
              f"than with today's recipe (the row's interval reaching into today's), speed within {BAR_SPEED:.0%} and "
              f"a median heading change of at most {BAR_HEADING_DEG:g} degrees.", "",
-             *(f"- {_verdict(k, r, rows.get(k.split(',')[0] + ', today'))}" for k, r in rows.items())]
+             *(f"- {_verdict(k, r, rows.get(r['gait'] + ', today'))}" for k, r in rows.items())]
     missing = [Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS if f"{g}, today" not in found]
     if missing:
         lines.append(not_yet(*missing))
