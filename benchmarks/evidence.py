@@ -9,8 +9,9 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "ROOT", "STRATEGIES", "arrow", "cite",
-    "groups_at", "interval", "not_yet", "pct", "read_evidence", "settings_line", "shown",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
+    "arrow", "cite", "groups_at", "interval", "not_yet", "pct", "read_evidence", "settings_line", "shown",
+    "speed_heading_misses",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,6 +23,8 @@ GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
 BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
 """The quality bar: falls in at most 1% of episodes, speed within 10% of the reference, median heading change at
 most 15 degrees."""
+SPEED_BAR, HEADING_BAR = f"speed within {BAR_SPEED:.0%}", f"heading within {BAR_HEADING_DEG:g} deg"
+"""The quality bar's speed and heading bars as the tables name them."""
 STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
 """Column order of the strategies in a switching table."""
 
@@ -75,3 +78,15 @@ def settings_line(settings: dict) -> str:
     """What a benchmark's cells are: size, seed and the definition of a fall."""
     return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
            "definition"
+
+
+def speed_heading_misses(evaluation: dict) -> dict[str, str]:
+    """The quality bar's speed and heading bars an evaluation misses, each with its figure: ``speed_error`` (a
+    fraction of the reference speed; m/s of drift for a gait standing still) over :data:`BAR_SPEED`, and
+    ``median_heading_change_deg`` over :data:`BAR_HEADING_DEG`."""
+    found = {}
+    if evaluation["speed_error"] > BAR_SPEED:
+        found[SPEED_BAR] = f"{pct(evaluation['speed_error'])}%"
+    if evaluation["median_heading_change_deg"] > BAR_HEADING_DEG:
+        found[HEADING_BAR] = f"{evaluation['median_heading_change_deg']:.1f} deg"
+    return found

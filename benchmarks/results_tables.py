@@ -26,8 +26,6 @@ from pathlib import Path
 
 from evidence import (
     BAR_FALLS,
-    BAR_HEADING_DEG,
-    BAR_SPEED,
     EVIDENCE,
     GAITS,
     ROOT,
@@ -40,6 +38,7 @@ from evidence import (
     read_evidence,
     settings_line,
     shown,
+    speed_heading_misses,
 )
 from robustness_tables import pushed_table, robustness_table, shove_table
 
@@ -85,14 +84,8 @@ def _gait_order(name: str) -> tuple[int, str]:
 
 def _misses(r: dict) -> list[str]:
     """What of the quality bar an evaluation misses, from its numbers."""
-    misses = []
-    if r["fall_rate"] > BAR_FALLS:
-        misses.append(f"falls {pct(r['fall_rate'])}% over {pct(BAR_FALLS)}%")
-    if r["speed_error"] > BAR_SPEED:
-        misses.append(f"speed error {pct(r['speed_error'])}% over {pct(BAR_SPEED)}%")
-    if r["median_heading_change_deg"] > BAR_HEADING_DEG:
-        misses.append(f"median heading change {r['median_heading_change_deg']:.1f} deg over {BAR_HEADING_DEG:g}")
-    return misses
+    misses = [f"falls {pct(r['fall_rate'])}% over {pct(BAR_FALLS)}%"] if r["fall_rate"] > BAR_FALLS else []
+    return misses + [f"{bar}: {why}" for bar, why in speed_heading_misses(r).items()]
 
 
 def _quality_row(r: dict) -> str:

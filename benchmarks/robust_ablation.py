@@ -24,6 +24,8 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
+from evidence import BAR_HEADING_DEG, BAR_SPEED
+
 from gaitlib.atomic import write_json
 from gaitlib.benchmark.push_curve import single_push_curve
 from gaitlib.benchmark.switch_in import switch_in
@@ -67,9 +69,9 @@ def ablation_row(library: Library, gait: str, *, states: Path, sources: list[str
     zero = row["zero_n"]
     row["quality_bar"] = {
         "speed_error": zero["speed_error"],
-        "speed_within_10_percent": zero["speed_error"] <= 0.10,
+        "speed_within_10_percent": zero["speed_error"] <= BAR_SPEED,
         "median_heading_change_deg": zero["median_heading_change_deg"],
-        "heading_within_15_deg": zero["median_heading_change_deg"] <= 15.0,
+        "heading_within_15_deg": zero["median_heading_change_deg"] <= BAR_HEADING_DEG,
     }
     return {
         "gait": gait,

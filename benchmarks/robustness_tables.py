@@ -23,7 +23,9 @@ from evidence import (
     BAR_SPEED,
     EVIDENCE,
     GAITS,
+    HEADING_BAR,
     ROOT,
+    SPEED_BAR,
     arrow,
     cite,
     groups_at,
@@ -32,6 +34,7 @@ from evidence import (
     pct,
     read_evidence,
     settings_line,
+    speed_heading_misses,
 )
 
 from gaitlib.stats import wilson_interval
@@ -52,7 +55,7 @@ SHOVE_UP_TO_NS = 12.0
 BARS = {"single shove": 0.01, "pushes up to 50 N": 0.02, "0 N": 0.005, "one step late": 0.01}
 """The robust recipe's goals, falls at most: a single shove of up to :data:`SHOVE_UP_TO_NS` in any direction, pushes
 up to 50 N while walking (``gaitlib eval --push-max 50``), 0 N with the trained delay, every action one step late."""
-GAIT_BARS = ("touches at 0 N", f"speed within {BAR_SPEED:.0%}", f"heading within {BAR_HEADING_DEG:g} deg")
+GAIT_BARS = ("touches at 0 N", SPEED_BAR, HEADING_BAR)
 """The robust recipe's goals beside the falls, at 0 N with the trained delay: the legs touching the ground in no more
 episodes than with today's recipe (the row's 95% interval reaching down into today's; judged where the gait's
 ``today`` row is stored), and the quality bar's speed and median heading change."""
@@ -124,9 +127,7 @@ def misses(row: dict, today: dict | None = None) -> dict[str, str]:
         worse = zero["touch_ci95"][0] > base["touch_ci95"][1]
         found[GAIT_BARS[0]] = (f"{pct(zero['touch_rate'])}% {interval(*zero['touch_ci95'])} against today's "
                                f"{pct(base['touch_rate'])}% {interval(*base['touch_ci95'])}") if worse else None
-    found[GAIT_BARS[1]] = f"{pct(zero['speed_error'])}%" if zero["speed_error"] > BAR_SPEED else None
-    heading = zero["median_heading_change_deg"]
-    found[GAIT_BARS[2]] = f"{heading:.1f} deg" if heading > BAR_HEADING_DEG else None
+    found.update(speed_heading_misses(zero))
     return {bar: why for bar, why in found.items() if why}
 
 
