@@ -16,8 +16,9 @@ import pytest
 from cli_runner import gaitlib_quick
 from conftest import copy_library
 
-from gaitlib.library import Library
+from gaitlib.library import Library, library_status
 from gaitlib.library.layout import ordered_pairs, shipped_library_dir
+from gaitlib.training.recipe import Recipe
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -144,6 +145,36 @@ def test_both_libraries_in_the_repository_are_whole(folder, gaits) -> None:
     assert status["problems"] == [] and sorted(status["gaits"]) == list(gaits)
     assert set(status["switching"]["pairs"]) == set(ordered_pairs(gaits))
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
+
+
+def readme_recipe(readme: Path) -> Recipe:
+    """The recipe a staged library's README trains every gait with: its ``R="..."`` line of ``gaitlib train``
+    options."""
+    line = next(text for text in readme.read_text().splitlines() if text.startswith('R="'))
+    tokens = shlex.split(line.removeprefix("R=").strip('"'))
+    options = {key.removeprefix("--").replace("-", "_"): value for key, value in zip(tokens[::2], tokens[1::2])}
+    low, high = options.pop("kick_interval").split(":")
+    words = {key: options.pop(key) for key in ("push_kind", "kick_draw", "terminate")}
+    return Recipe(**words, kick_interval=(float(low), float(high)), **{k: float(v) for k, v in options.items()})
+
+
+def test_the_staged_robust_library_is_the_recipe_and_the_table_its_readme_gives() -> None:
+    """``library-robust`` is staged (no switching models yet): every entry passes its schema and checksums, was
+    trained with the recipe of its README's commands, and its stored evaluation is the README's table row."""
+    lib = Library(REPO / "library-robust")
+    status = library_status(lib)
+    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and status.gaits
+    assert {problem.about for problem in status.problems} <= {"switching"}
+    recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
+    assert recipe.push_kind == "kick" and recipe.terminate == "trunk"
+    for gait in lib.gaits():
+        metadata = json.loads((lib.root / gait / "metadata.json").read_text())
+        assert Recipe.from_record(metadata["training"]["recipe"]) == recipe, gait
+        evaluation = metadata["evaluation"]
+        assert (evaluation["episodes"], evaluation["seconds"], evaluation["falls"]) == (256, 20.0, "trunk")
+        row = next(text for text in readme.splitlines() if text.startswith(f"| `{gait}` |")).split(" | ")
+        assert row[2] == f"{round(evaluation['fall_rate'] * 256)} of 256", (gait, row)
+        assert row[-1] == f"{evaluation['median_heading_change_deg']:.1f} deg |", (gait, row)
 
 
 def test_the_shipped_library_grew_without_touching_its_first_gaits() -> None:
