@@ -6,6 +6,8 @@ switches under pushes and on another A1. ``benchmarks/results_tables.py`` writes
   ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``): falls and leg touches with
   their 95% intervals, each row's recipe, and each row against :data:`BARS` and :data:`GAIT_BARS`, read from its
   numbers.
+- ``robust-library``: each of the six gaits with today's recipe (``GAIT-today.json``) beside the same gait in
+  ``library-robust/`` (``GAIT-`` :data:`CHOSEN` ``.json``), each against every bar.
 - ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
   like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
   reach each setting's goal (:data:`BENCHMARKS`).
@@ -41,14 +43,17 @@ from gaitlib.stats import wilson_interval
 from gaitlib.training.recipe import Recipe
 
 __all__ = [
-    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "GAIT_BARS", "SHOVES", "ablation_rows", "misses",
-    "pushed_table", "read_row", "recipe_options", "robustness_table", "shove_table",
+    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows",
+    "library_table", "misses", "pushed_table", "read_row", "recipe_options", "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
 """The robust recipe's ablation rows: ``GAIT-VARIANT.json``, ``today`` the shipped gaits as trained."""
 ABLATION_GAITS = ("pace", "trot")
 """The gaits of the ablation's baseline, in the table's order."""
+CHOSEN = "gamma-kick-trunk-touch5"
+"""The variant the ablation chose (docs/results.md, "How the rebuild's recipe is chosen"), the recipe of
+``library-robust/``: each gait's row of it is ``GAIT-gamma-kick-trunk-touch5.json``."""
 SHOVES = (6.0, 12.0, 18.0)
 """The single shoves tabled, N s."""
 SHOVE_UP_TO_NS = 12.0
@@ -242,6 +247,56 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
     if missing:
         lines.append(not_yet(*missing))
     return "\n".join([*lines, "", "Evidence:", "", *(f"- {cite(p, e)}" for p, e in found.values())])
+
+
+def _library_row(gait: str, library: str, row: dict, today: dict | None) -> str:
+    figures, missed, bars = row["figures"], misses(row, today), _bars(today)
+    point = _shove_at(figures, SHOVE_UP_TO_NS)
+    if point is None:
+        shove = "- | -"
+    else:
+        name, falls, episodes = _worst(point)
+        shove = _rate(point["falls"], point["episodes"], point["ci95"]) + " | " + (
+            f"{name} {falls}/{episodes}" if falls else "none")
+    cells = [f"{pct(figures[k]['fall_rate'])} {interval(*figures[k]['fall_ci95'])}"
+             for k in ("push_50n", "zero_n", "one_step_late")]
+    zero = figures["zero_n"]
+    cells.append(f"{pct(zero['touch_rate'])} {interval(*zero['touch_ci95'])}")
+    return f"| {gait} | {library} | {shove} | " + " | ".join(cells) + f" | {len(bars) - len(missed)} of {len(bars)} |"
+
+
+def library_table(ablation_dir: Path = ABLATION) -> str:
+    """``robust-library``: each gait of :data:`GAITS` trained with today's recipe (the shipped library,
+    ``GAIT-today.json``) and with the :data:`CHOSEN` one (``library-robust/``), side by side against the bars; the
+    touches of both judged against the shipped gait's."""
+    found = {}
+    for gait in GAITS:
+        for variant, library in (("today", "shipped"), (CHOSEN, "`library-robust`")):
+            path = Path(ablation_dir) / f"{gait}-{variant}.json"
+            if (row := read_row(path)) is not None:
+                found[gait, library] = (path, row)
+    robust = [gait for gait in GAITS if (gait, "`library-robust`") in found]
+    if not robust:
+        return not_yet(*(Path(ablation_dir) / f"{gait}-{CHOSEN}.json" for gait in GAITS))
+    lines = [f"| gait | library | shove {SHOVE_UP_TO_NS:g} N s [95%] | worst direction | pushes up to 50 N [95%] "
+             "| 0 N [95%] | one step late [95%] | touches at 0 N [95%] | bars met |", "|---|---|" + "---|" * 7]
+    verdicts, whole = [], []
+    for (gait, library), (_, row) in found.items():
+        shipped = found.get((gait, "shipped"))
+        today = None if shipped is None else shipped[1]["result"]
+        lines.append(_library_row(gait, library, row["result"], today))
+        verdicts.append(f"- {_verdict(f'{gait}, {library}', row['result'], today)}")
+        if library != "shipped" and not misses(row["result"], today):
+            whole.append(gait)
+    absent = [Path(ablation_dir) / f"{gait}-{variant}.json" for gait in GAITS for variant in ("today", CHOSEN)
+              if (gait, "shipped" if variant == "today" else "`library-robust`") not in found]
+    notes = [f"Falls, % of episodes [95% interval], each figure as in the ablation's table above. With the robust "
+             f"recipe {len(whole)} of the {len(robust)} gaits measured meet every bar"
+             + (f" ({', '.join(whole)})." if whole else ".")]
+    if absent:
+        notes.append(not_yet(*absent))
+    return "\n".join([*lines, "", " ".join(notes), "", *verdicts, "", "Evidence:", "",
+                      *(f"- {cite(p, e)}" for p, e in found.values())])
 
 
 def _cells(name: str, evidence: dict, magnitude: float) -> dict[str, dict]:

@@ -139,7 +139,7 @@ def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
                if not line.startswith("|") and "`gaitlib" not in line)
     made = {name: _flat(body) for name, body in made.items()}
     quality = made["quality-bar"]
-    assert "5 of 6 gaits meet the bar" in quality and "The pace misses it: median heading change 16.8 deg" in quality
+    assert "5 of 6 gaits meet the bar" in quality and "The pace misses it: heading within 15 deg: 16.8 deg." in quality
     assert "0.002 m/s drift" in quality and "`gaitlib eval GAIT --episodes 256 --json`" in quality
     pairs = made["pairs-0n"]
     low, high = wilson_interval(995, 1000)
@@ -372,3 +372,39 @@ def test_every_gaits_single_shove_curve_from_small_evidence(tmp_path: Path, evid
     assert f"`{evidence / 'shove-walk.json'}` (made 2026-12-05): `{command}`" in made
     for gait in ("trot", "stand", "bound", "pronk"):
         assert f"`{evidence / f'shove-{gait}.json'}`" in made  # not yet measured, named
+
+
+def test_the_robust_library_beside_the_shipped_one_from_small_rows(tmp_path: Path, evidence: Path) -> None:
+    """Each gait's shipped row beside its row with the chosen recipe, every bar counted, the touches of both judged
+    against the shipped gait's; a gait without its chosen row is named, not judged."""
+    folder = tmp_path / "ablation"
+    folder.mkdir()
+    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-library"]
+    assert _flat(made).startswith("Not yet measured:") and f"stand-{robustness.CHOSEN}.json" in made
+    quiet = dict.fromkeys(("front", "left", "back", "right"), 0)
+    rows = {"today": _ablation("stand", ("pace", "trot"), shove={**quiet, "left": 4}, push=30, zero=0, late=2,
+                               minutes=11.7),
+            robustness.CHOSEN: _ablation("stand", ("pace", "trot"), shove=quiet, push=0, zero=0, late=0, minutes=9.4)}
+    rows[robustness.CHOSEN]["figures"]["zero_n"] = _run(0, touches=60)  # past the shipped 3 of 1,024
+    for variant, row in rows.items():
+        (folder / f"stand-{variant}.json").write_text(json.dumps({"command": f"robust_ablation {variant}",
+                                                                   "result": row}))
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-library"]
+    assert _prose_fits(body)
+    made = _flat(body)
+    assert made.index("| stand | shipped |") < made.index("| stand | `library-robust` |")
+    assert f"| stand | shipped | 0.4 {_interval(4, 1024)} | left 4/256 | 2.9 {_interval(30, 1024)} | 0.0 " \
+           f"{_interval(0, 1024)} | 0.2 {_interval(2, 1024)} | 0.3 {_interval(3, 1024)} | 5 of 7 |" in made
+    assert f"| stand | `library-robust` | 0.0 {_interval(0, 1024)} | none |" in made
+    assert f"| 5.9 {_interval(60, 1024)} | 6 of 7 |" in made
+    assert "stand, `library-robust`: meets 6 of the 7 bars (single shove, pushes up to 50 N, 0 N, one step late, " \
+           f"speed within 10%, heading within 15 deg); misses touches at 0 N: 5.9% {_interval(60, 1024)} against " \
+           f"today's 0.3% {_interval(3, 1024)}." in made
+    assert "With the robust recipe 0 of the 1 gaits measured meet every bar." in made
+    named = f"`{folder / 'stand-today.json'}`"
+    assert f"pace-{robustness.CHOSEN}.json" in made and f"{named}," not in made and f"{named} not" not in made
+    rows[robustness.CHOSEN]["figures"]["zero_n"] = _run(0)
+    (folder / f"stand-{robustness.CHOSEN}.json").write_text(json.dumps({"command": "x", "result": rows[
+        robustness.CHOSEN]}))
+    made = _flat(robustness.library_table(folder))
+    assert "1 of the 1 gaits measured meet every bar (stand)." in made and "| 7 of 7 |" in made
