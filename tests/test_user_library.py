@@ -160,7 +160,8 @@ def readme_recipe(readme: Path) -> Recipe:
 
 def test_the_staged_robust_library_is_the_recipe_and_the_table_its_readme_gives() -> None:
     """``library-robust`` is staged (no switching models yet): every entry passes its schema and checksums, was
-    trained with the recipe of its README's commands, and its stored evaluation is the README's table row."""
+    trained with the recipe of its README's commands, and its stored evaluation is the README's table row; the walk,
+    the bound and the pronk from the states of this library's own trot, pace and stand."""
     lib = Library(REPO / "library-robust")
     status = library_status(lib)
     assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and status.gaits
@@ -175,6 +176,10 @@ def test_the_staged_robust_library_is_the_recipe_and_the_table_its_readme_gives(
         row = next(text for text in readme.splitlines() if text.startswith(f"| `{gait}` |")).split(" | ")
         assert row[2] == f"{round(evaluation['fall_rate'] * 256)} of 256", (gait, row)
         assert row[-1] == f"{evaluation['median_heading_change_deg']:.1f} deg |", (gait, row)
+    identities = lib.identities()  # the later gaits start from the states this library's first three hand over
+    for gait in {"walk", "bound", "pronk"} & set(lib.gaits()):
+        start = json.loads((lib.root / gait / "metadata.json").read_text())["training"]["switch_start"]
+        assert start["from_identities"] == {g: identities[g] for g in ("pace", "stand", "trot")}, gait
 
 
 def test_the_shipped_library_grew_without_touching_its_first_gaits() -> None:
