@@ -27,10 +27,12 @@ from gaitlib.meta import TrialProtocol, load_switching
 from gaitlib.transitions import read, validate
 
 SMALL = CollectConfig(
-    samples=40, num_worlds=4, push_max=400.0, backend="mujoco", chunk=8,
+    samples=64, num_worlds=4, push_max=400.0, backend="mujoco", chunk=8,
     protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4),
 )
-"""Five chunks of eight samples on four worlds, short cycles, strong pushes (both labels)."""
+"""Eight chunks of eight samples on four worlds, short cycles, strong pushes (both labels). Eight, so that chunks
+are still to be sent when a worker is killed after the first commit: the dead one is then handed one (and replaced)
+even where its last chunk had finished before the kill, which with five chunks the live worker could all take."""
 
 
 def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> None:
@@ -94,13 +96,13 @@ def test_a_killed_worker_loses_no_committed_sample(local_ray, tiny_library, plai
 
     result = collect(path, library=tiny_library, gaits=GAITS, config=SMALL, progress=kill_a_worker,
                      cluster=ClusterConfig(workers=2))
-    assert result.samples == result.written == 40 and [s for s, _, _ in seen] == [8, 16, 24, 32, 40]
+    assert result.samples == result.written == 64 and [s for s, _, _ in seen] == list(range(8, 65, 8))
     for count, committed, _ in seen:  # every commit kept every sample committed before it, bit for bit
         assert_same(read(path).samples.select(slice(0, count)), committed)
     data = read(path)
     assert_same(data.samples, plain.samples)  # the lost chunk was collected again, identically
     assert data.header == plain.header  # schema, gaits, identities, settings
-    assert set(data.samples.success.tolist()) == {0, 1} and sorted(set(data.samples.chunk.tolist())) == [0, 1, 2, 3, 4]
+    assert set(data.samples.success.tolist()) == {0, 1} and sorted(set(data.samples.chunk.tolist())) == list(range(8))
     assert data.info.sessions[0]["ray"] is True and plain.info.sessions[0]["ray"] is False
     assert len(seen[0][2]) == 2 and any(n.endswith("-2") for n in seen[-1][2])  # the dead worker was replaced
 
