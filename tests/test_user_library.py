@@ -152,7 +152,8 @@ def readme_recipe(readme: Path) -> Recipe:
     options."""
     line = next(text for text in readme.read_text().splitlines() if text.startswith('R="'))
     tokens = shlex.split(line.removeprefix("R=").strip('"'))
-    options = {key.removeprefix("--").replace("-", "_"): value for key, value in zip(tokens[::2], tokens[1::2])}
+    pairs = zip(tokens[::2], tokens[1::2], strict=True)
+    options = {key.removeprefix("--").replace("-", "_"): value for key, value in pairs}
     low, high = options.pop("kick_interval").split(":")
     words = {key: options.pop(key) for key in ("push_kind", "kick_draw", "terminate")}
     return Recipe(**words, kick_interval=(float(low), float(high)), **{k: float(v) for k, v in options.items()})
