@@ -97,6 +97,19 @@ def _worst(point: dict) -> tuple[str, int, int]:
     return name, falls, episodes
 
 
+def _shove_cells(point: dict | None) -> list[str]:
+    """A shove's falls with their interval, and its worst direction (its falls of its episodes); "-" unmeasured."""
+    if point is None:
+        return ["-", "-"]
+    name, falls, episodes = _worst(point)
+    return [_rate(point["falls"], point["episodes"], point["ci95"]), f"{name} {falls}/{episodes}" if falls else "none"]
+
+
+def _run_cell(run: dict, what: str) -> str:
+    """An evaluation's rate of ``what`` (``fall`` or ``touch``) with its 95% interval."""
+    return f"{pct(run[f'{what}_rate'])} {interval(*run[f'{what}_ci95'])}"
+
+
 def _sources(figures: dict) -> list[str]:
     return [f["source"] for k, f in figures.items() if k.startswith("switch_in_from_")]
 
@@ -138,17 +151,8 @@ def misses(row: dict, today: dict | None = None) -> dict[str, str]:
 
 def _falls_row(label: str, row: dict, sources: list[str]) -> str:
     figures = row["figures"]
-    cells = []
-    for impulse in SHOVES:
-        point = _shove_at(figures, impulse)
-        if point is None:
-            cells += ["-", "-"]
-            continue
-        name, falls, episodes = _worst(point)
-        worst = f"{name} {falls}/{episodes}" if falls else "none"
-        cells += [_rate(point["falls"], point["episodes"], point["ci95"]), worst]
-    for key in ("push_50n", "zero_n", "one_step_late"):
-        cells.append(f"{pct(figures[key]['fall_rate'])} {interval(*figures[key]['fall_ci95'])}")
+    cells = [cell for impulse in SHOVES for cell in _shove_cells(_shove_at(figures, impulse))]
+    cells += [_run_cell(figures[key], "fall") for key in ("push_50n", "zero_n", "one_step_late")]
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
         cells.append(_rate(switch["falls"], switch["episodes"], switch["fall_ci95"]) if switch else "-")
@@ -161,8 +165,7 @@ def _touches_row(label: str, row: dict, sources: list[str]) -> str:
     for impulse in SHOVES:
         point = _shove_at(figures, impulse)
         cells.append(_rate(point["touches"], point["episodes"], point["touch_ci95"]) if point else "-")
-    for key in ("push_50n", "zero_n", "one_step_late"):
-        cells.append(f"{pct(figures[key]['touch_rate'])} {interval(*figures[key]['touch_ci95'])}")
+    cells += [_run_cell(figures[key], "touch") for key in ("push_50n", "zero_n", "one_step_late")]
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
         cells.append(_rate(switch["touches"], switch["episodes"], switch["touch_ci95"]) if switch else "-")
@@ -249,32 +252,22 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
     return "\n".join([*lines, "", "Evidence:", "", *(f"- {cite(p, e)}" for p, e in found.values())])
 
 
-def _library_row(gait: str, library: str, row: dict, today: dict | None) -> str:
-    figures, missed, bars = row["figures"], misses(row, today), _bars(today)
-    point = _shove_at(figures, SHOVE_UP_TO_NS)
-    if point is None:
-        shove = "- | -"
-    else:
-        name, falls, episodes = _worst(point)
-        shove = _rate(point["falls"], point["episodes"], point["ci95"]) + " | " + (
-            f"{name} {falls}/{episodes}" if falls else "none")
-    cells = [f"{pct(figures[k]['fall_rate'])} {interval(*figures[k]['fall_ci95'])}"
-             for k in ("push_50n", "zero_n", "one_step_late")]
-    zero = figures["zero_n"]
-    cells.append(f"{pct(zero['touch_rate'])} {interval(*zero['touch_ci95'])}")
-    return f"| {gait} | {library} | {shove} | " + " | ".join(cells) + f" | {len(bars) - len(missed)} of {len(bars)} |"
+def _library_row(gait: str, library: str, row: dict, met: str) -> str:
+    figures = row["figures"]
+    cells = [gait, library, *_shove_cells(_shove_at(figures, SHOVE_UP_TO_NS)),
+             *(_run_cell(figures[key], "fall") for key in ("push_50n", "zero_n", "one_step_late")),
+             _run_cell(figures["zero_n"], "touch"), met]
+    return "| " + " | ".join(cells) + " |"
 
 
 def library_table(ablation_dir: Path = ABLATION) -> str:
     """``robust-library``: each gait of :data:`GAITS` trained with today's recipe (the shipped library,
     ``GAIT-today.json``) and with the :data:`CHOSEN` one (``library-robust/``), side by side against the bars; the
     touches of both judged against the shipped gait's."""
-    found = {}
-    for gait in GAITS:
-        for variant, library in (("today", "shipped"), (CHOSEN, "`library-robust`")):
-            path = Path(ablation_dir) / f"{gait}-{variant}.json"
-            if (row := read_row(path)) is not None:
-                found[gait, library] = (path, row)
+    libraries = (("today", "shipped"), (CHOSEN, "`library-robust`"))
+    paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
+             for gait in GAITS for variant, library in libraries}
+    found = {key: (path, row) for key, path in paths.items() if (row := read_row(path)) is not None}
     robust = [gait for gait in GAITS if (gait, "`library-robust`") in found]
     if not robust:
         return not_yet(*(Path(ablation_dir) / f"{gait}-{CHOSEN}.json" for gait in GAITS))
@@ -284,12 +277,12 @@ def library_table(ablation_dir: Path = ABLATION) -> str:
     for (gait, library), (_, row) in found.items():
         shipped = found.get((gait, "shipped"))
         today = None if shipped is None else shipped[1]["result"]
-        lines.append(_library_row(gait, library, row["result"], today))
+        missed, bars = misses(row["result"], today), _bars(today)
+        lines.append(_library_row(gait, library, row["result"], f"{len(bars) - len(missed)} of {len(bars)}"))
         verdicts.append(f"- {_verdict(f'{gait}, {library}', row['result'], today)}")
-        if library != "shipped" and not misses(row["result"], today):
+        if library != "shipped" and not missed:
             whole.append(gait)
-    absent = [Path(ablation_dir) / f"{gait}-{variant}.json" for gait in GAITS for variant in ("today", CHOSEN)
-              if (gait, "shipped" if variant == "today" else "`library-robust`") not in found]
+    absent = [path for key, path in paths.items() if key not in found]
     notes = [f"Falls, % of episodes [95% interval], each figure as in the ablation's table above. With the robust "
              f"recipe {len(whole)} of the {len(robust)} gaits measured meet every bar"
              + (f" ({', '.join(whole)})." if whole else ".")]
@@ -377,14 +370,10 @@ def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) ->
     verdicts = {gait: _shove_miss({"single_shove": points}) for gait, (points, _, _) in curves.items()}
     for gait, (points, _, _) in curves.items():
         at = {float(p["impulse_ns"]): p for p in points}
-        cells = [_rate(at[i]["falls"], at[i]["episodes"], at[i]["ci95"]) if i in at else "-" for i in impulses]
+        cells = [_shove_cells(at.get(i))[0] for i in impulses]
         point = at.get(SHOVE_UP_TO_NS)
-        if point is None:
-            worst, touches = "-", "-"
-        else:
-            name, falls, episodes = _worst(point)
-            worst = f"{name} {falls}/{episodes}" if falls else "none"
-            touches = _rate(point["touches"], point["episodes"], point["touch_ci95"])
+        worst = _shove_cells(point)[1]
+        touches = "-" if point is None else _rate(point["touches"], point["episodes"], point["touch_ci95"])
         verdict = f"no: {verdicts[gait]}" if verdicts[gait] else "yes"
         lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
     met = [g for g, miss in verdicts.items() if miss is None]
