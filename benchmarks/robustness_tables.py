@@ -97,12 +97,19 @@ def _worst(point: dict) -> tuple[str, int, int]:
     return name, falls, episodes
 
 
+def _shove_rate(point: dict | None, what: str = "falls") -> str:
+    """A shove's ``falls`` (or ``touches``) with their 95% interval; "-" unmeasured."""
+    if point is None:
+        return "-"
+    return _rate(point[what], point["episodes"], point["ci95" if what == "falls" else "touch_ci95"])
+
+
 def _shove_cells(point: dict | None) -> list[str]:
     """A shove's falls with their interval, and its worst direction (its falls of its episodes); "-" unmeasured."""
     if point is None:
         return ["-", "-"]
     name, falls, episodes = _worst(point)
-    return [_rate(point["falls"], point["episodes"], point["ci95"]), f"{name} {falls}/{episodes}" if falls else "none"]
+    return [_shove_rate(point), f"{name} {falls}/{episodes}" if falls else "none"]
 
 
 def _run_cell(run: dict, what: str) -> str:
@@ -161,10 +168,7 @@ def _falls_row(label: str, row: dict, sources: list[str]) -> str:
 
 def _touches_row(label: str, row: dict, sources: list[str]) -> str:
     figures = row["figures"]
-    cells = []
-    for impulse in SHOVES:
-        point = _shove_at(figures, impulse)
-        cells.append(_rate(point["touches"], point["episodes"], point["touch_ci95"]) if point else "-")
+    cells = [_shove_rate(_shove_at(figures, impulse), "touches") for impulse in SHOVES]
     cells += [_run_cell(figures[key], "touch") for key in ("push_50n", "zero_n", "one_step_late")]
     for source in sources:
         switch = figures.get(f"switch_in_from_{source}")
@@ -175,8 +179,12 @@ def _touches_row(label: str, row: dict, sources: list[str]) -> str:
     return f"| {label} | " + " | ".join(cells) + " |"
 
 
-def _verdict(label: str, row: dict, today: dict | None) -> str:
-    missed, bars = misses(row, today), _bars(today)
+def _judged(row: dict, today: dict | None) -> tuple[dict[str, str], list[str]]:
+    """The bars a row misses (:func:`misses`) and the bars it is judged against (:func:`_bars`)."""
+    return misses(row, today), _bars(today)
+
+
+def _verdict(label: str, missed: dict[str, str], bars: list[str]) -> str:
     met = [bar for bar in bars if bar not in missed]
     text = f"{label}: meets {len(met)} of the {len(bars)} bars"
     text += f" ({', '.join(met)})" if met else ""
@@ -245,7 +253,7 @@ def robustness_table(ablation_dir: Path = ABLATION) -> str:
              f"{pct(BARS['one step late'])}% one step late; at 0 N, the legs touching the ground in no more episodes "
              f"than with today's recipe (the row's interval reaching into today's), speed within {BAR_SPEED:.0%} and "
              f"a median heading change of at most {BAR_HEADING_DEG:g} degrees.", "",
-             *(f"- {_verdict(k, r, rows.get(r['gait'] + ', today'))}" for k, r in rows.items())]
+             *(f"- {_verdict(k, *_judged(r, rows.get(r['gait'] + ', today')))}" for k, r in rows.items())]
     missing = [Path(ablation_dir) / f"{g}-today.json" for g in ABLATION_GAITS if f"{g}, today" not in found]
     if missing:
         lines.append(not_yet(*missing))
@@ -277,9 +285,9 @@ def library_table(ablation_dir: Path = ABLATION) -> str:
     for (gait, library), (_, row) in found.items():
         shipped = found.get((gait, "shipped"))
         today = None if shipped is None else shipped[1]["result"]
-        missed, bars = misses(row["result"], today), _bars(today)
+        missed, bars = _judged(row["result"], today)
         lines.append(_library_row(gait, library, row["result"], f"{len(bars) - len(missed)} of {len(bars)}"))
-        verdicts.append(f"- {_verdict(f'{gait}, {library}', row['result'], today)}")
+        verdicts.append(f"- {_verdict(f'{gait}, {library}', missed, bars)}")
         if library != "shipped" and not missed:
             whole.append(gait)
     absent = [path for key, path in paths.items() if key not in found]
@@ -370,10 +378,9 @@ def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) ->
     verdicts = {gait: _shove_miss({"single_shove": points}) for gait, (points, _, _) in curves.items()}
     for gait, (points, _, _) in curves.items():
         at = {float(p["impulse_ns"]): p for p in points}
-        cells = [_shove_cells(at.get(i))[0] for i in impulses]
+        cells = [_shove_rate(at.get(i)) for i in impulses]
         point = at.get(SHOVE_UP_TO_NS)
-        worst = _shove_cells(point)[1]
-        touches = "-" if point is None else _rate(point["touches"], point["episodes"], point["touch_ci95"])
+        worst, touches = _shove_cells(point)[1], _shove_rate(point, "touches")
         verdict = f"no: {verdicts[gait]}" if verdicts[gait] else "yes"
         lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
     met = [g for g, miss in verdicts.items() if miss is None]
