@@ -1,6 +1,6 @@
 """What the tables of docs/results.md share: where the stored evidence is, how a file of it is read and cited, and
-how a rate, an interval, a pair and a benchmark's settings are written (``benchmarks/results_tables.py`` and
-``benchmarks/robustness_tables.py`` make the tables)."""
+how a rate, an interval, a pair and a benchmark's settings are written (``benchmarks/results_tables.py``,
+``benchmarks/robustness_tables.py`` and ``benchmarks/switch_tables.py`` make the tables)."""
 
 from __future__ import annotations
 

@@ -4,13 +4,14 @@
     python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``robustness-gaits``,
-``robust-library``, ``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``net-accuracy``; the robustness
-tables are made in ``benchmarks/robustness_tables.py``, what both share is ``benchmarks/evidence.py``). Everything
-between the two is made here from the evidence and nothing else, so a figure edited by hand, or a stored result replaced
-without rewriting the doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence:
-``docs/results/library/*.json``, each ``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its
-raw output}``, the robust recipe's ablation rows beside them (``docs/results/ablation/``), and the library's own
-``library/switching/accuracy.json``. A table whose evidence is not stored yet says "not yet measured".
+``robust-library``, ``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``robust-switches``,
+``net-accuracy``; the gaits' robustness tables are made in ``benchmarks/robustness_tables.py``, the switches beyond 0 N
+in ``benchmarks/switch_tables.py``, what they share is ``benchmarks/evidence.py``). Everything between the two is made
+here from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the
+doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
+``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust library's
+beside them (``docs/results/robust/``), the robust recipe's ablation rows (``docs/results/ablation/``), and the
+library's own ``library/switching/accuracy.json``. A table whose evidence is not stored yet says "not yet measured".
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ from evidence import (
     shown,
     speed_heading_misses,
 )
-from robustness_tables import library_table, pushed_table, robustness_table, shove_table
+from robustness_tables import library_table, robustness_table, shove_table
+from switch_tables import pushed_table, switches_table
 
 from gaitlib.atomic import atomic_path
 from gaitlib.stats import wilson_interval
@@ -55,7 +57,7 @@ DOC = ROOT / "docs" / "results.md"
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
 TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes",
-          "pushed-and-heldout", "net-accuracy")
+          "pushed-and-heldout", "robust-switches", "net-accuracy")
 """The generated blocks, in the doc's order."""
 GOAL = 0.99
 """The success a switch is counted against."""
@@ -283,13 +285,15 @@ def _wrap(body: str) -> str:
 
 def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
-    ``ablation`` beside ``evidence_dir``."""
+    ``ablation`` beside ``evidence_dir``, the robust library's evidence from ``robust`` beside it."""
     tables = {"quality-bar": quality_bar(evidence_dir),
               "robustness-gaits": robustness_table(Path(evidence_dir).parent / "ablation"),
               "robust-library": library_table(Path(evidence_dir).parent / "ablation"),
               "shove-curves": shove_table(evidence_dir, Path(evidence_dir).parent / "ablation"),
               "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
-              "pushed-and-heldout": pushed_table(evidence_dir), "net-accuracy": accuracy_table(accuracy)}
+              "pushed-and-heldout": pushed_table(evidence_dir),
+              "robust-switches": switches_table(evidence_dir, Path(evidence_dir).parent / "robust"),
+              "net-accuracy": accuracy_table(accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 
 

@@ -1,5 +1,6 @@
-"""The robustness tables of docs/results.md: the gaits themselves against the robust recipe's goals, and the thirty
-switches under pushes and on another A1. ``benchmarks/results_tables.py`` writes them into the doc with the others.
+"""The robustness tables of docs/results.md: the gaits themselves against the robust recipe's goals
+(``benchmarks/switch_tables.py`` tables the switches). ``benchmarks/results_tables.py`` writes them into the doc with
+the others.
 
 - ``robustness-gaits``: the robust recipe's ablation, ``docs/results/ablation/GAIT-VARIANT.json`` for each gait of
   :data:`ABLATION_GAITS` (``GAIT-today.json``: the shipped gait, today's recipe), each ``{"command", "result"}`` as
@@ -8,9 +9,8 @@ switches under pushes and on another A1. ``benchmarks/results_tables.py`` writes
   numbers.
 - ``robust-library``: each of the six gaits with today's recipe (``GAIT-today.json``) beside the same gait in
   ``library-robust/`` (``GAIT-`` :data:`CHOSEN` ``.json``), each against every bar.
-- ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
-  like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
-  reach each setting's goal (:data:`BENCHMARKS`).
+- ``shove-curves``: every gait's falls under one shove of each impulse, from its ablation row, else from
+  ``docs/results/library/shove-GAIT.json`` (``gaitlib eval GAIT --impulses ... --json``).
 
 A table whose evidence is not stored yet says "not yet measured", one file missing of several says which.
 """
@@ -28,23 +28,19 @@ from evidence import (
     HEADING_BAR,
     ROOT,
     SPEED_BAR,
-    arrow,
     cite,
-    groups_at,
     interval,
     not_yet,
     pct,
     read_evidence,
-    settings_line,
     speed_heading_misses,
 )
 
-from gaitlib.stats import wilson_interval
 from gaitlib.training.recipe import Recipe
 
 __all__ = [
-    "ABLATION", "ABLATION_GAITS", "BARS", "BENCHMARKS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows",
-    "library_table", "misses", "pushed_table", "read_row", "recipe_options", "robustness_table", "shove_table",
+    "ABLATION", "ABLATION_GAITS", "BARS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows",
+    "library_table", "misses", "read_row", "recipe_options", "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
@@ -64,12 +60,6 @@ GAIT_BARS = ("touches at 0 N", SPEED_BAR, HEADING_BAR)
 """The robust recipe's goals beside the falls, at 0 N with the trained delay: the legs touching the ground in no more
 episodes than with today's recipe (the row's 95% interval reaching down into today's; judged where the gait's
 ``today`` row is stored), and the quality bar's speed and median heading change."""
-STRATEGY = "net-lookahead"
-BENCHMARKS = (("bench-50n", 50.0, 0.95, "50 N"), ("bench-menagerie-0n", 0.0, 0.97, "Menagerie A1, 0 N"))
-"""The switching benchmarks of ``pushed-and-heldout``: evidence name, push magnitude (N), the goal a pair is
-counted against, the column's name."""
-
-
 def read_row(path: Path) -> dict | None:
     """The ablation row stored at ``path`` as evidence (``command``, ``made``, ``result``); ``None`` when there is
     none yet."""
@@ -298,57 +288,6 @@ def library_table(ablation_dir: Path = ABLATION) -> str:
         notes.append(not_yet(*absent))
     return "\n".join([*lines, "", " ".join(notes), "", *verdicts, "", "Evidence:", "",
                       *(f"- {cite(p, e)}" for p, e in found.values())])
-
-
-def _cells(name: str, evidence: dict, magnitude: float) -> dict[str, dict]:
-    groups = groups_at(evidence["result"], magnitude)
-    if STRATEGY not in groups:
-        raise ValueError(f"{name}.json holds no {STRATEGY} group at {magnitude:g} N")
-    return groups[STRATEGY]
-
-
-def _success(cell: dict | None, goal: float) -> str:
-    if cell is None:
-        return "- | -"
-    successes, samples = cell["successes"], cell["samples"]
-    rate = pct(successes / samples)
-    bold = f"**{rate}**" if successes >= goal * samples else rate
-    return f"{bold} {interval(*wilson_interval(successes, samples))} | {pct(cell['touched'] / samples)}%"
-
-
-def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
-    """``pushed-and-heldout``: ``net-lookahead`` on every pair at 50 N and on MuJoCo Menagerie's A1 at 0 N, each
-    against its goal."""
-    paths = {name: Path(evidence_dir) / f"{name}.json" for name, *_ in BENCHMARKS}
-    stored = {name: read_evidence(p) for name, p in paths.items()}
-    if all(e is None for e in stored.values()):
-        return not_yet(*paths.values())
-    found = [(stored[name], _cells(name, stored[name], magnitude), goal, title)
-             for name, magnitude, goal, title in BENCHMARKS if stored[name] is not None]
-    pairs = sorted({p for _, cells, _, _ in found for p in cells}, key=lambda p: p.split("-"))
-    lines = ["| pair | " + " | ".join(f"{title} [95%] | {title} touches" for *_, title in found) + " |",
-             "|---|" + "---|---|" * len(found)]
-    lines += [f"| {arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
-              for p in pairs]
-    pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
-              for _, cells, _, _ in found]
-    lines.append("| all pairs | " + " | ".join(f"{pct(s / n)} {interval(*wilson_interval(s, n))} | {pct(t / n)}%"
-                                                for s, n, t in pooled) + " |")
-    reached = [sum(c["successes"] >= goal * c["samples"] for c in cells.values()) for _, cells, goal, _ in found]
-    lines.append("| pairs at the goal or more | " + " | ".join(
-        f"{k} of {len(cells)} (goal {pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
-                 + " |")
-    notes = []
-    for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
-        settings = evidence["result"]["settings"]
-        robot = f", robot `{settings['robot']}`" if settings.get("robot") else ""
-        notes.append(f"{title}: {k} of {len(cells)} pairs reach {pct(goal)}%; `{STRATEGY}`, "
-                     f"{settings_line(settings)}{robot}.")
-    absent = [paths[name] for name, e in stored.items() if e is None]
-    if absent:
-        notes.append(not_yet(*absent))
-    sources = [f"- {cite(paths[name], e)}" for name, e in stored.items() if e is not None]
-    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
 
 
 def _curve(evidence_dir: Path, ablation_dir: Path, gait: str) -> tuple[list[dict], Path, dict] | None:

@@ -24,6 +24,7 @@ GAITS = ("bound", "pace", "pronk", "stand", "trot", "walk")
 sys.path.insert(0, str(SCRIPT.parent))  # the benchmarks import each other by name, as when run as scripts
 tables = importlib.import_module("results_tables")
 robustness = importlib.import_module("robustness_tables")
+switching = importlib.import_module("switch_tables")
 
 
 def _store(folder: Path, name: str, result: dict, command: str = "gaitlib made-up") -> Path:
@@ -347,7 +348,47 @@ def test_the_pairs_pushed_and_on_another_a1_from_small_evidence(tmp_path: Path, 
     _store(evidence, "bench-menagerie-0n", _benchmark({"net-lookahead": held["groups"]["net-lookahead@0"]["cells"]},
                                                       magnitude=50.0, samples=200))
     with pytest.raises(ValueError, match=r"bench-menagerie-0n\.json holds no net-lookahead group at 0 N"):
-        robustness.pushed_table(evidence)
+        switching.pushed_table(evidence)
+
+
+def test_the_robust_library_switches_beside_the_shipped_ones_from_small_evidence(tmp_path: Path,
+                                                                                  evidence: Path) -> None:
+    robust = tmp_path / "robust"  # beside the evidence folder, as docs/results/robust is beside library/
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"])
+    assert made.startswith("Not yet measured:") and "robust/bench-0n.json" in made and "robust/bench-50n.json" in made
+    robust.mkdir()
+    # the robust library: random 98% on every pair but trot -> walk (96%), net-lookahead 99.6% but trot -> pace (99%)
+    _store(robust, "bench-0n", _benchmark({
+        "net-lookahead": {p: _cell(990 if p == "trot-pace" else 996) for p in _pairs()},
+        "random": {p: _cell(960 if p == "trot-walk" else 980) for p in _pairs()},
+    }), "gaitlib benchmark --library library-robust --strategies random,net-lookahead --magnitudes 0")
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"]
+    assert _prose_fits(body)
+    made = _flat(body)
+    assert ("| pair | random, 0 N: shipped [95%] | random, 0 N: robust [95%] | net-lookahead, 0 N: shipped [95%] "
+            "| net-lookahead, 0 N: robust [95%] |") in made and "50 N:" not in made.split("Not yet")[0]
+    # the goals: random 97%, net-lookahead 99.5% (the shipped 99.5% into the walk meets it; the robust 99.0% not)
+    assert (f"| trot → walk | 90.0 {_interval(900, 1000)} | 96.0 {_interval(960, 1000)} "
+            f"| **99.5** {_interval(995, 1000)} | **99.6** {_interval(996, 1000)} |") in made
+    assert f"| trot → pace | 90.0 {_interval(900, 1000)} | **98.0** {_interval(980, 1000)} | 97.0 " in made
+    assert f"| **98.0** {_interval(980, 1000)} | 97.0 {_interval(970, 1000)} | 99.0 {_interval(990, 1000)} |" in made
+    assert "| pairs at the goal or more | 0 of 30 | 29 of 30 | 10 of 30 | 29 of 30 |" in made
+    assert f"| all pairs (touches) | 90.0 {_interval(27000, 30000)} (1.2%) | 97.9 {_interval(29380, 30000)} (1.2%) |" \
+        in made
+    assert ("random, 0 N (goal 97.0% on every pair): shipped 0 of 30, robust 29 of 30; shipped: 1,000 transitions a "
+            "cell, seed 0; falls by the `trunk` definition; robust: 1,000 transitions") in made
+    assert "net-lookahead, 0 N (goal 99.5% on every pair): shipped 10 of 30, robust 29 of 30;" in made
+    assert "Not yet measured: `" in made and "robust/bench-50n.json`, `" in made and "bench-0n.json`, `" not in made
+    assert made.count("(made 2026-12-03)") == 2 and "--library library-robust" in made
+    # at 50 N only the robust library is stored: the shipped column is "-" throughout
+    _store(robust, "bench-50n", _benchmark({"net-lookahead": {p: _cell(390, 400) for p in _pairs()}},
+                                           magnitude=50.0, samples=400))
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"])
+    assert f"| - | **97.5** {_interval(390, 400)} |" in made and "| 29 of 30 | - | 30 of 30 |" in made
+    assert "net-lookahead, 50 N (goal 95.0% on every pair): robust 30 of 30; robust: 400 transitions" in made
+    _store(robust, "bench-50n", _benchmark({"random": {p: _cell(390, 400) for p in _pairs()}}, magnitude=50.0))
+    with pytest.raises(ValueError, match=r"bench-50n\.json holds no net-lookahead group at 50 N"):
+        switching.switches_table(evidence, robust)
 
 
 def test_every_gaits_single_shove_curve_from_small_evidence(tmp_path: Path, evidence: Path) -> None:

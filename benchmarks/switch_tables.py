@@ -1,0 +1,144 @@
+"""The switching tables of docs/results.md beyond 0 N on the shipped library: the thirty switches under pushes and on
+another A1, and the robust library's switches beside the shipped one's. ``benchmarks/results_tables.py`` writes them
+into the doc with the others.
+
+- ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
+  like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
+  reach each setting's goal (:data:`BENCHMARKS`).
+- ``robust-switches``: every pair in both libraries, the shipped one's evidence (``docs/results/library/``) beside
+  the robust one's (``docs/results/robust/``, the same files made with ``--library library-robust``), in each
+  setting of :data:`SWITCH_GOALS` the robust library has stored, against the robust recipe's goal for it.
+
+A table whose evidence is not stored yet says "not yet measured", one file missing of several says which.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from evidence import EVIDENCE, ROOT, arrow, cite, groups_at, interval, not_yet, pct, read_evidence, settings_line
+
+from gaitlib.stats import wilson_interval
+
+__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "pushed_table", "switches_table"]
+
+ROBUST = ROOT / "docs" / "results" / "robust"
+"""The stored raw results of ``library-robust/``, named as the shipped library's are."""
+STRATEGY = "net-lookahead"
+"""The strategy ``pushed-and-heldout`` tables."""
+BENCHMARKS = (("bench-50n", 50.0, 0.95, "50 N"), ("bench-menagerie-0n", 0.0, 0.97, "Menagerie A1, 0 N"))
+"""The switching benchmarks of ``pushed-and-heldout``: evidence name, push magnitude (N), the goal a pair is
+counted against, the column's name."""
+SWITCH_GOALS = (("bench-0n", "random", 0.0, 0.97, "random, 0 N"),
+                ("bench-0n", "net-lookahead", 0.0, 0.995, "net-lookahead, 0 N"),
+                ("bench-50n", "net-lookahead", 50.0, 0.95, "net-lookahead, 50 N"),
+                ("bench-menagerie-0n", "net-lookahead", 0.0, 0.97, "net-lookahead, Menagerie A1, 0 N"))
+"""The settings of ``robust-switches``: evidence name, strategy, push magnitude (N), the robust recipe's goal for
+every pair (success at least), the setting's name."""
+
+
+def _cells(name: str, evidence: dict, magnitude: float, strategy: str = STRATEGY) -> dict[str, dict]:
+    groups = groups_at(evidence["result"], magnitude)
+    if strategy not in groups:
+        raise ValueError(f"{name}.json holds no {strategy} group at {magnitude:g} N")
+    return groups[strategy]
+
+
+def _rate(cell: dict | None, goal: float) -> str:
+    """A pair's success with its Wilson 95% interval, bold at ``goal`` or more; "-" unmeasured."""
+    if cell is None:
+        return "-"
+    successes, samples = cell["successes"], cell["samples"]
+    rate = pct(successes / samples)
+    return f"{f'**{rate}**' if successes >= goal * samples else rate} {interval(*wilson_interval(successes, samples))}"
+
+
+def _success(cell: dict | None, goal: float) -> str:
+    if cell is None:
+        return "- | -"
+    return f"{_rate(cell, goal)} | {pct(cell['touched'] / cell['samples'])}%"
+
+
+def _run(settings: dict) -> str:
+    """A benchmark's size, seed, definition of a fall and, when not the training simulator's, its robot."""
+    return settings_line(settings) + (f", robot `{settings['robot']}`" if settings.get("robot") else "")
+
+
+def _pooled(cells: dict[str, dict]) -> tuple[int, int, int]:
+    """Successes, transitions and touched transitions over every pair."""
+    return tuple(sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched"))
+
+
+def _reached(cells: dict[str, dict], goal: float) -> int:
+    return sum(c["successes"] >= goal * c["samples"] for c in cells.values())
+
+
+def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
+    """``pushed-and-heldout``: ``net-lookahead`` on every pair at 50 N and on MuJoCo Menagerie's A1 at 0 N, each
+    against its goal."""
+    paths = {name: Path(evidence_dir) / f"{name}.json" for name, *_ in BENCHMARKS}
+    stored = {name: read_evidence(p) for name, p in paths.items()}
+    if all(e is None for e in stored.values()):
+        return not_yet(*paths.values())
+    found = [(stored[name], _cells(name, stored[name], magnitude), goal, title)
+             for name, magnitude, goal, title in BENCHMARKS if stored[name] is not None]
+    pairs = sorted({p for _, cells, _, _ in found for p in cells}, key=lambda p: p.split("-"))
+    lines = ["| pair | " + " | ".join(f"{title} [95%] | {title} touches" for *_, title in found) + " |",
+             "|---|" + "---|---|" * len(found)]
+    lines += [f"| {arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
+              for p in pairs]
+    pooled = [_pooled(cells) for _, cells, _, _ in found]
+    lines.append("| all pairs | " + " | ".join(f"{pct(s / n)} {interval(*wilson_interval(s, n))} | {pct(t / n)}%"
+                                                for s, n, t in pooled) + " |")
+    reached = [_reached(cells, goal) for _, cells, goal, _ in found]
+    lines.append("| pairs at the goal or more | " + " | ".join(
+        f"{k} of {len(cells)} (goal {pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
+                 + " |")
+    notes = []
+    for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
+        notes.append(f"{title}: {k} of {len(cells)} pairs reach {pct(goal)}%; `{STRATEGY}`, "
+                     f"{_run(evidence['result']['settings'])}.")
+    absent = [paths[name] for name, e in stored.items() if e is None]
+    if absent:
+        notes.append(not_yet(*absent))
+    sources = [f"- {cite(paths[name], e)}" for name, e in stored.items() if e is not None]
+    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
+
+
+def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> str:
+    """``robust-switches``: each pair's success in the shipped and the robust library, setting by setting of
+    :data:`SWITCH_GOALS`, with the pooled rate, its touches, and the pairs at the goal in each."""
+    folders = {"shipped": Path(evidence_dir), "robust": Path(robust_dir)}
+    names = dict.fromkeys(name for name, *_ in SWITCH_GOALS)
+    paths = {(library, name): folder / f"{name}.json" for library, folder in folders.items() for name in names}
+    stored = {key: read_evidence(path) for key, path in paths.items()}
+    settings = [goal for goal in SWITCH_GOALS if stored["robust", goal[0]] is not None]
+    if not settings:
+        return not_yet(*(paths["robust", name] for name in names))
+    columns = [(setting, library, None if stored[library, setting[0]] is None else
+                _cells(setting[0], stored[library, setting[0]], setting[2], setting[1]))
+               for setting in settings for library in folders]
+    pairs = sorted({p for *_, cells in columns if cells for p in cells}, key=lambda p: p.split("-"))
+    lines = ["| pair | " + " | ".join(f"{s[4]}: {library} [95%]" for s, library, _ in columns) + " |",
+             "|---|" + "---|" * len(columns)]
+    lines += [f"| {arrow(p)} | " + " | ".join(_rate(cells.get(p) if cells else None, s[3]) for s, _, cells in columns)
+              + " |" for p in pairs]
+    pooled = [_pooled(cells) if cells else None for *_, cells in columns]
+    lines.append("| all pairs (touches) | " + " | ".join(
+        "-" if p is None else f"{pct(p[0] / p[1])} {interval(*wilson_interval(p[0], p[1]))} ({pct(p[2] / p[1])}%)"
+        for p in pooled) + " |")
+    lines.append("| pairs at the goal or more | " + " | ".join(
+        "-" if cells is None else f"{_reached(cells, s[3])} of {len(cells)}" for s, _, cells in columns) + " |")
+    notes = []
+    for setting in settings:
+        counts = [f"{library} {_reached(cells, setting[3])} of {len(cells)}"
+                  for s, library, cells in columns if s is setting and cells]
+        made = {library: stored[library, setting[0]] for library in folders if stored[library, setting[0]]}
+        runs = "; ".join(f"{library}: {_run(e['result']['settings'])}" for library, e in made.items())
+        notes.append(f"{setting[4]} (goal {pct(setting[3])}% on every pair): {', '.join(counts)}; {runs}.")
+    absent = [paths["robust", name] for name in names if stored["robust", name] is None]
+    if absent:
+        notes.append(not_yet(*absent))
+    sources = [f"- {cite(paths[key], e)}" for key, e in stored.items()
+               if e is not None and any(key[1] == s[0] for s in settings)]
+    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
