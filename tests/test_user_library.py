@@ -160,13 +160,15 @@ def readme_recipe(readme: Path) -> Recipe:
 
 
 def test_the_staged_robust_library_is_the_recipe_and_the_table_its_readme_gives() -> None:
-    """``library-robust`` is staged (no switching models yet): every entry passes its schema and checksums, was
-    trained with the recipe of its README's commands, and its stored evaluation is the README's table row; the walk,
-    the bound and the pronk from the states of this library's own trot, pace and stand."""
+    """``library-robust`` is staged: every entry passes its schema and checksums, was trained with the recipe of its
+    README's commands, and its stored evaluation is the README's table row; the walk, the bound and the pronk from the
+    states of this library's own trot, pace and stand; its switching models drive all thirty pairs of the gaits as
+    they are, labelled the field's way."""
     lib = Library(REPO / "library-robust")
     status = library_status(lib)
-    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and status.gaits
-    assert {problem.about for problem in status.problems} <= {"switching"}
+    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 6
+    assert status.problems == () and len(status.pairs) == 30 and set(status.pairs.values()) == {"covered"}
+    assert set(status.falls().values()) == {"trunk"}
     recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
     identities = lib.identities()
     assert recipe.push_kind == "kick" and recipe.terminate == "trunk"
