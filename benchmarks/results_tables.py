@@ -5,13 +5,15 @@
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``robustness-gaits``,
 ``robust-library``, ``shove-curves``, ``pairs-0n``, ``routes``, ``pushed-and-heldout``, ``robust-switches``,
-``net-accuracy``; the gaits' robustness tables are made in ``benchmarks/robustness_tables.py``, the switches beyond 0 N
-in ``benchmarks/switch_tables.py``, what they share is ``benchmarks/evidence.py``). Everything between the two is made
-here from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the
-doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
-``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust library's
-beside them (``docs/results/robust/``), the robust recipe's ablation rows (``docs/results/ablation/``), and the
-library's own ``library/switching/accuracy.json``. A table whose evidence is not stored yet says "not yet measured".
+``net-accuracy``, ``net-accuracy-robust``; the gaits' robustness tables are made in ``benchmarks/robustness_tables.py``,
+the switches beyond 0 N in ``benchmarks/switch_tables.py``, what they share is ``benchmarks/evidence.py``). Everything
+between the two is made here from the evidence and nothing else, so a figure edited by hand, or a stored result replaced
+without rewriting the doc, makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence:
+``docs/results/library/*.json``, each ``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its
+raw output}``, the robust library's beside them (``docs/results/robust/``), the robust recipe's ablation rows
+(``docs/results/ablation/``), and the library's own ``library/switching/accuracy.json``
+(``library-robust/switching/accuracy.json`` for the robust one). A table whose evidence is not stored yet says "not yet
+measured".
 """
 
 from __future__ import annotations
@@ -48,16 +50,20 @@ from gaitlib.atomic import atomic_path
 from gaitlib.stats import wilson_interval
 
 __all__ = [
-    "ACCURACY", "DOC", "EVIDENCE", "TABLES", "accuracy_table", "check_doc", "fill", "first_difference", "main",
-    "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table", "write_doc",
+    "ACCURACY", "DOC", "EVIDENCE", "ROBUST_ACCURACY", "TABLES", "accuracy_table", "check_doc", "fill",
+    "first_difference", "main", "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table",
+    "write_doc",
 ]
 
 DOC = ROOT / "docs" / "results.md"
 """The doc whose generated blocks these tables are."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
+ROBUST_ACCURACY = ROOT / "library-robust" / "switching" / "accuracy.json"
+"""The robust library's transition-net's accuracy report."""
 TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes",
-          "pushed-and-heldout", "robust-switches", "net-accuracy")
+          "pushed-and-heldout", "robust-switches", "net-accuracy",
+          "net-accuracy-robust")
 """The generated blocks, in the doc's order."""
 GOAL = 0.99
 """The success a switch is counted against."""
@@ -259,11 +265,13 @@ def accuracy_table(path: Path = ACCURACY) -> str:
     falls = report.get("falls")
     labels = (f"labels by the `{falls}` definition" if falls else
               "labels by the `contact` definition (the fit predates the choice of definition)")
-    command = "gaitlib fit " + " ".join(f"--data {d}" for d in report.get("data", []))
+    library = shown(path.parent.parent)
+    command = "gaitlib fit " + (f"--library {library} " if library != "library" else "")
+    command += " ".join(f"--data {d}" for d in report.get("data", []))
     command += " --ablation" if set(INPUTS) <= set(ours) else f" --input {report.get('input_written', 'latent')}"
     command += f" --falls {falls}" if falls else ""
     notes = [f"Means over all pairs, the paper's order: {'; '.join(claims)}." if claims else "",
-             f"`{report.get('input_written', '?')}` is the input the shipped net uses; {report.get('samples', 0):,} "
+             f"`{report.get('input_written', '?')}` is the input the library's net uses; {report.get('samples', 0):,} "
              f"samples, {labels}."]
     return "\n".join([*lines, "", " ".join(n for n in notes if n), "",
                       f"Evidence: `{shown(path)}`, written by `{command}` (the data and inputs the file records)."])
@@ -283,7 +291,8 @@ def _wrap(body: str) -> str:
                        for p in body.split("\n\n"))
 
 
-def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> dict[str, str]:
+def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
+                  robust_accuracy: Path = ROBUST_ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
     ``ablation`` beside ``evidence_dir``, the robust library's evidence from ``robust`` beside it."""
     tables = {"quality-bar": quality_bar(evidence_dir),
@@ -293,7 +302,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> d
               "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
               "pushed-and-heldout": pushed_table(evidence_dir),
               "robust-switches": switches_table(evidence_dir, Path(evidence_dir).parent / "robust"),
-              "net-accuracy": accuracy_table(accuracy)}
+              "net-accuracy": accuracy_table(accuracy), "net-accuracy-robust": accuracy_table(robust_accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 
 

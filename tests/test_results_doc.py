@@ -134,7 +134,9 @@ def _flat(text: str) -> str:
 
 def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     accuracy = _accuracy(tmp_path / "accuracy.json")
-    made = tables.render_tables(evidence, accuracy)
+    (tmp_path / "robust-lib" / "switching").mkdir(parents=True)
+    robust = _accuracy(tmp_path / "robust-lib" / "switching" / "accuracy.json", latent=0.8, explicit=0.85)
+    made = tables.render_tables(evidence, accuracy, robust)
     assert list(made) == list(tables.TABLES)
     assert all(len(line) <= tables.WIDTH for body in made.values() for line in body.splitlines()
                if not line.startswith("|") and "`gaitlib" not in line)
@@ -154,13 +156,18 @@ def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     net = made["net-accuracy"]
     assert "| latent, paper | 89.2 | 89.2 |" in net  # the paper's 0.8915, rounded as written
     assert "latent >= explicit holds (75.0 against 74.0)" in net and "--ablation --falls trunk" in net
+    robust_net = made["net-accuracy-robust"]  # another library's net: its fit names the library
+    assert "latent >= explicit does not hold (80.0 against 85.0)" in robust_net
+    assert f"`gaitlib fit --library {tmp_path / 'robust-lib'} --data data/a.h5 --data data/b.h5 --ablation" \
+        in robust_net
 
 
 def test_missing_evidence_says_not_yet_measured(tmp_path: Path, evidence: Path) -> None:
     for name in ("bench-0n", "bench-routed"):
         (evidence / f"{name}.json").unlink()
-    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")
+    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json", tmp_path / "none" / "accuracy.json")
     assert made["pairs-0n"].startswith("Not yet measured:") and "bench-0n.json" in made["pairs-0n"]
+    assert made["net-accuracy-robust"].startswith("Not yet measured:")
     assert made["routes"].startswith("Not yet measured:") and "bench-routed.json" in made["routes"]
     assert "bench-direct" not in made["routes"] and made["net-accuracy"].startswith("Not yet measured:")
     assert "| pace |" in made["quality-bar"]
