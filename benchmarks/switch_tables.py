@@ -134,7 +134,9 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
         counts = [f"{library} {_reached(cells, setting[3])} of {len(cells)}"
                   for s, library, cells in columns if s is setting and cells]
         made = {library: stored[library, setting[0]] for library in folders if stored[library, setting[0]]}
-        runs = "; ".join(f"{library}: {_run(e['result']['settings'])}" for library, e in made.items())
+        lines_of = {library: _run(e["result"]["settings"]) for library, e in made.items()}
+        same = len(made) > 1 and len(set(lines_of.values())) == 1
+        runs = f"each library: {lines_of['robust']}" if same else "; ".join(f"{k}: {v}" for k, v in lines_of.items())
         notes.append(f"{setting[4]} (goal {pct(setting[3])}% on every pair): {', '.join(counts)}; {runs}.")
     absent = [paths["robust", name] for name in names if stored["robust", name] is None]
     if absent:

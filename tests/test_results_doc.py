@@ -382,8 +382,8 @@ def test_the_robust_library_switches_beside_the_shipped_ones_from_small_evidence
     assert "| pairs at the goal or more | 0 of 30 | 29 of 30 | 10 of 30 | 29 of 30 |" in made
     assert f"| all pairs (touches) | 90.0 {_interval(27000, 30000)} (1.2%) | 97.9 {_interval(29380, 30000)} (1.2%) |" \
         in made
-    assert ("random, 0 N (goal 97.0% on every pair): shipped 0 of 30, robust 29 of 30; shipped: 1,000 transitions a "
-            "cell, seed 0; falls by the `trunk` definition; robust: 1,000 transitions") in made
+    assert ("random, 0 N (goal 97.0% on every pair): shipped 0 of 30, robust 29 of 30; each library: 1,000 "
+            "transitions a cell, seed 0; falls by the `trunk` definition.") in made
     assert "net-lookahead, 0 N (goal 99.5% on every pair): shipped 10 of 30, robust 29 of 30;" in made
     assert "Not yet measured: `" in made and "robust/bench-50n.json`, `" in made and "bench-0n.json`, `" not in made
     assert made.count("(made 2026-12-03)") == 2 and "--library library-robust" in made
