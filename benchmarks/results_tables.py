@@ -62,8 +62,7 @@ ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 ROBUST_ACCURACY = ROOT / "library-robust" / "switching" / "accuracy.json"
 """The robust library's transition-net's accuracy report."""
 TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes",
-          "pushed-and-heldout", "robust-switches", "net-accuracy",
-          "net-accuracy-robust")
+          "pushed-and-heldout", "robust-switches", "net-accuracy", "net-accuracy-robust")
 """The generated blocks, in the doc's order."""
 GOAL = 0.99
 """The success a switch is counted against."""
@@ -265,8 +264,7 @@ def accuracy_table(path: Path = ACCURACY) -> str:
     falls = report.get("falls")
     labels = (f"labels by the `{falls}` definition" if falls else
               "labels by the `contact` definition (the fit predates the choice of definition)")
-    library = shown(path.parent.parent)
-    command = "gaitlib fit " + (f"--library {library} " if library != "library" else "")
+    command = "gaitlib fit " + ("" if path.resolve() == ACCURACY else f"--library {shown(path.parent.parent)} ")
     command += " ".join(f"--data {d}" for d in report.get("data", []))
     command += " --ablation" if set(INPUTS) <= set(ours) else f" --input {report.get('input_written', 'latent')}"
     command += f" --falls {falls}" if falls else ""
@@ -295,13 +293,11 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
                   robust_accuracy: Path = ROBUST_ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
     ``ablation`` beside ``evidence_dir``, the robust library's evidence from ``robust`` beside it."""
-    tables = {"quality-bar": quality_bar(evidence_dir),
-              "robustness-gaits": robustness_table(Path(evidence_dir).parent / "ablation"),
-              "robust-library": library_table(Path(evidence_dir).parent / "ablation"),
-              "shove-curves": shove_table(evidence_dir, Path(evidence_dir).parent / "ablation"),
+    ablation, robust = Path(evidence_dir).parent / "ablation", Path(evidence_dir).parent / "robust"
+    tables = {"quality-bar": quality_bar(evidence_dir), "robustness-gaits": robustness_table(ablation),
+              "robust-library": library_table(ablation), "shove-curves": shove_table(evidence_dir, ablation),
               "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
-              "pushed-and-heldout": pushed_table(evidence_dir),
-              "robust-switches": switches_table(evidence_dir, Path(evidence_dir).parent / "robust"),
+              "pushed-and-heldout": pushed_table(evidence_dir), "robust-switches": switches_table(evidence_dir, robust),
               "net-accuracy": accuracy_table(accuracy), "net-accuracy-robust": accuracy_table(robust_accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 

@@ -39,8 +39,8 @@ from evidence import (
 from gaitlib.training.recipe import Recipe
 
 __all__ = [
-    "ABLATION", "ABLATION_GAITS", "BARS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows",
-    "library_table", "misses", "read_row", "recipe_options", "robustness_table", "shove_table",
+    "ABLATION", "ABLATION_GAITS", "BARS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows", "library_table", "misses",
+    "read_row", "recipe_options", "robustness_table", "shove_table",
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
@@ -60,6 +60,8 @@ GAIT_BARS = ("touches at 0 N", SPEED_BAR, HEADING_BAR)
 """The robust recipe's goals beside the falls, at 0 N with the trained delay: the legs touching the ground in no more
 episodes than with today's recipe (the row's 95% interval reaching down into today's; judged where the gait's
 ``today`` row is stored), and the quality bar's speed and median heading change."""
+
+
 def read_row(path: Path) -> dict | None:
     """The ablation row stored at ``path`` as evidence (``command``, ``made``, ``result``); ``None`` when there is
     none yet."""

@@ -15,12 +15,13 @@ A table whose evidence is not stored yet says "not yet measured", one file missi
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 from evidence import EVIDENCE, ROOT, arrow, cite, groups_at, interval, not_yet, pct, read_evidence, settings_line
 
 from gaitlib.stats import wilson_interval
 
-__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "pushed_table", "switches_table"]
+__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "SwitchGoal", "pushed_table", "switches_table"]
 
 ROBUST = ROOT / "docs" / "results" / "robust"
 """The stored raw results of ``library-robust/``, named as the shipped library's are."""
@@ -29,12 +30,27 @@ STRATEGY = "net-lookahead"
 BENCHMARKS = (("bench-50n", 50.0, 0.95, "50 N"), ("bench-menagerie-0n", 0.0, 0.97, "Menagerie A1, 0 N"))
 """The switching benchmarks of ``pushed-and-heldout``: evidence name, push magnitude (N), the goal a pair is
 counted against, the column's name."""
-SWITCH_GOALS = (("bench-0n", "random", 0.0, 0.97, "random, 0 N"),
-                ("bench-0n", "net-lookahead", 0.0, 0.995, "net-lookahead, 0 N"),
-                ("bench-50n", "net-lookahead", 50.0, 0.95, "net-lookahead, 50 N"),
-                ("bench-menagerie-0n", "net-lookahead", 0.0, 0.97, "net-lookahead, Menagerie A1, 0 N"))
-"""The settings of ``robust-switches``: evidence name, strategy, push magnitude (N), the robust recipe's goal for
-every pair (success at least), the setting's name."""
+
+
+class SwitchGoal(NamedTuple):
+    """A setting of ``robust-switches`` and the robust recipe's goal in it."""
+
+    name: str
+    """The evidence file's name, without ``.json``."""
+    strategy: str
+    magnitude: float
+    """Push magnitude, N."""
+    goal: float
+    """The success every pair should reach, a fraction."""
+    title: str
+    """The setting as the table names it."""
+
+
+SWITCH_GOALS = (SwitchGoal("bench-0n", "random", 0.0, 0.97, "random, 0 N"),
+                SwitchGoal("bench-0n", "net-lookahead", 0.0, 0.995, "net-lookahead, 0 N"),
+                SwitchGoal("bench-50n", "net-lookahead", 50.0, 0.95, "net-lookahead, 50 N"),
+                SwitchGoal("bench-menagerie-0n", "net-lookahead", 0.0, 0.97, "net-lookahead, Menagerie A1, 0 N"))
+"""The settings of ``robust-switches``, in the table's order."""
 
 
 def _cells(name: str, evidence: dict, magnitude: float, strategy: str = STRATEGY) -> dict[str, dict]:
@@ -109,38 +125,36 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
     """``robust-switches``: each pair's success in the shipped and the robust library, setting by setting of
     :data:`SWITCH_GOALS`, with the pooled rate, its touches, and the pairs at the goal in each."""
     folders = {"shipped": Path(evidence_dir), "robust": Path(robust_dir)}
-    names = dict.fromkeys(name for name, *_ in SWITCH_GOALS)
+    names = dict.fromkeys(goal.name for goal in SWITCH_GOALS)
     paths = {(library, name): folder / f"{name}.json" for library, folder in folders.items() for name in names}
     stored = {key: read_evidence(path) for key, path in paths.items()}
-    settings = [goal for goal in SWITCH_GOALS if stored["robust", goal[0]] is not None]
-    if not settings:
+    goals = [goal for goal in SWITCH_GOALS if stored["robust", goal.name] is not None]
+    if not goals:
         return not_yet(*(paths["robust", name] for name in names))
-    columns = [(setting, library, None if stored[library, setting[0]] is None else
-                _cells(setting[0], stored[library, setting[0]], setting[2], setting[1]))
-               for setting in settings for library in folders]
+    columns = [(goal, library, None if (e := stored[library, goal.name]) is None else
+                _cells(goal.name, e, goal.magnitude, goal.strategy)) for goal in goals for library in folders]
     pairs = sorted({p for *_, cells in columns if cells for p in cells}, key=lambda p: p.split("-"))
-    lines = ["| pair | " + " | ".join(f"{s[4]}: {library} [95%]" for s, library, _ in columns) + " |",
+    lines = ["| pair | " + " | ".join(f"{g.title}: {library} [95%]" for g, library, _ in columns) + " |",
              "|---|" + "---|" * len(columns)]
-    lines += [f"| {arrow(p)} | " + " | ".join(_rate(cells.get(p) if cells else None, s[3]) for s, _, cells in columns)
+    lines += [f"| {arrow(p)} | " + " | ".join(_rate(cells.get(p) if cells else None, g.goal) for g, _, cells in columns)
               + " |" for p in pairs]
     pooled = [_pooled(cells) if cells else None for *_, cells in columns]
     lines.append("| all pairs (touches) | " + " | ".join(
         "-" if p is None else f"{pct(p[0] / p[1])} {interval(*wilson_interval(p[0], p[1]))} ({pct(p[2] / p[1])}%)"
         for p in pooled) + " |")
     lines.append("| pairs at the goal or more | " + " | ".join(
-        "-" if cells is None else f"{_reached(cells, s[3])} of {len(cells)}" for s, _, cells in columns) + " |")
+        "-" if cells is None else f"{_reached(cells, g.goal)} of {len(cells)}" for g, _, cells in columns) + " |")
     notes = []
-    for setting in settings:
-        counts = [f"{library} {_reached(cells, setting[3])} of {len(cells)}"
-                  for s, library, cells in columns if s is setting and cells]
-        made = {library: stored[library, setting[0]] for library in folders if stored[library, setting[0]]}
-        lines_of = {library: _run(e["result"]["settings"]) for library, e in made.items()}
-        same = len(made) > 1 and len(set(lines_of.values())) == 1
-        runs = f"each library: {lines_of['robust']}" if same else "; ".join(f"{k}: {v}" for k, v in lines_of.items())
-        notes.append(f"{setting[4]} (goal {pct(setting[3])}% on every pair): {', '.join(counts)}; {runs}.")
+    for goal in goals:
+        counts = [f"{library} {_reached(cells, goal.goal)} of {len(cells)}"
+                  for g, library, cells in columns if g is goal and cells]
+        runs = {library: _run(e["result"]["settings"]) for library in folders if (e := stored[library, goal.name])}
+        same = len(runs) > 1 and len(set(runs.values())) == 1
+        run = f"each library: {runs['robust']}" if same else "; ".join(f"{k}: {v}" for k, v in runs.items())
+        notes.append(f"{goal.title} (goal {pct(goal.goal)}% on every pair): {', '.join(counts)}; {run}.")
     absent = [paths["robust", name] for name in names if stored["robust", name] is None]
     if absent:
         notes.append(not_yet(*absent))
     sources = [f"- {cite(paths[key], e)}" for key, e in stored.items()
-               if e is not None and any(key[1] == s[0] for s in settings)]
+               if e is not None and any(key[1] == goal.name for goal in goals)]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
