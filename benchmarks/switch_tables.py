@@ -5,6 +5,9 @@ into the doc with the others.
 - ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
   like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
   reach each setting's goal (:data:`BENCHMARKS`).
+- ``map-robust``: ``docs/results/robust/map-0n.json`` (``gaitlib map``'s ``map.json`` on the robust library's 0 N
+  collection): each pair's success at a random moment, in its best and worst phase bin of the source and of the
+  destination cycle, and its touches.
 - ``robust-switches``: every pair in both libraries, the shipped one's evidence (``docs/results/library/``) beside
   the robust one's (``docs/results/robust/``, the same files made with ``--library library-robust``), in each
   setting of :data:`SWITCH_GOALS` the robust library has stored, against the robust recipe's goal for it.
@@ -21,7 +24,8 @@ from evidence import EVIDENCE, ROOT, arrow, cite, groups_at, interval, not_yet, 
 
 from gaitlib.stats import wilson_interval
 
-__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "SwitchGoal", "pushed_table", "switches_table"]
+__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "SwitchGoal", "map_table", "pushed_table",
+           "switches_table"]
 
 ROBUST = ROOT / "docs" / "results" / "robust"
 """The stored raw results of ``library-robust/``, named as the shipped library's are."""
@@ -158,3 +162,37 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
     sources = [f"- {cite(paths[key], e)}" for key, e in stored.items()
                if e is not None and any(key[1] == goal.name for goal in goals)]
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
+
+
+def _bin(rate: dict) -> str:
+    """One of a map's rates: success % with its interval and sample count."""
+    if not rate["samples"]:
+        return "-"
+    return f"{pct(rate['successes'] / rate['samples'])} {interval(*rate['ci95'])} of {rate['samples']:,}"
+
+
+def map_table(robust_dir: Path = ROBUST) -> str:
+    """``map-robust``: where the robust library's switches fail, pair by pair, from its stored transition map."""
+    path = Path(robust_dir) / "map-0n.json"
+    evidence = read_evidence(path)
+    if evidence is None:
+        return not_yet(path)
+    result = evidence["result"]
+    maps = sorted(result["pairs"], key=lambda m: m["pair"].split("-"))
+    lines = ["| pair | random moment [95%] | best source bin | worst source bin | best destination bin "
+             "| worst destination bin | touches |", "|---|---|---|---|---|---|---|"]
+    for m in maps:
+        source = sorted((r for r in m["by_source_phase"] if r["samples"]), key=lambda r: r["successes"] / r["samples"])
+        dest = sorted((r for r in m["by_dest_phase"] if r["samples"]), key=lambda r: r["successes"] / r["samples"])
+        touches = m["touches"]
+        lines.append(f"| {arrow(m['pair'])} | {_bin(m['overall'])} | {_bin(source[-1])} | {_bin(source[0])} "
+                     f"| {_bin(dest[-1])} | {_bin(dest[0])} | {pct(touches['successes'] / touches['samples'])}% |")
+    bins = ", ".join(sorted({str(m["bins"]) for m in maps}))
+    q99 = result.get("fall_after_s_q99")
+    falls = sum(len(m["fall_after_s"]) for m in maps)
+    note = (f"Success % of the collected switches, each at a moment and a destination phase drawn uniformly, "
+            f"with 95% Wilson intervals and sample counts; a bin is 1/{bins} of the source's or of the destination's "
+            f"cycle; falls by the `{result['falls']}` definition; touches: a non-foot body on the ground, ridden "
+            f"through. {falls:,} switch-caused falls with a recorded time"
+            + (f", 99% of them within {q99:.2f} s of the switch." if q99 is not None else "."))
+    return "\n".join([*lines, "", note, "", f"Evidence: {cite(path, evidence)}"])

@@ -456,3 +456,87 @@ def test_the_robust_library_beside_the_shipped_one_from_small_rows(tmp_path: Pat
         robustness.CHOSEN]}))
     made = _flat(robustness.library_table(folder))
     assert "1 of the 1 gaits measured meet every bar (stand)." in made and "| 7 of 7 |" in made
+
+
+def _sweep(successes: dict[str, dict[float, int]], *, static: dict[str, dict[float, int]] | None = None) -> dict:
+    """A sweep of 50 transitions a cell: strategy -> magnitude -> successes on every pair (``static``: on pace -> stand
+    and trot -> stand instead)."""
+    result = _benchmark({}, samples=50)
+    for strategy, by_magnitude in successes.items():
+        for magnitude, count in by_magnitude.items():
+            own = (static or {}).get(strategy, {})
+            cells = {p: _cell(own.get(magnitude, count) if p in ("pace-stand", "trot-stand") else count, 50)
+                     for p in _pairs()}
+            result["groups"][f"{strategy}@{magnitude:g}"] = {"strategy": strategy, "magnitude_n": magnitude,
+                                                             "backend": "mujoco", "elapsed_s": 1.0, "cells": cells}
+    return result
+
+
+def test_the_papers_sweep_for_both_libraries_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
+    robust = tmp_path / "robust"
+    robust.mkdir()
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"])
+    assert made.startswith("Not yet measured:") and "evidence/sweep.json" in made and "robust/sweep.json" in made
+    # the shipped library: net 45 of 50 at 0 N and 25 at 500 N, but 50 and 40 on the two pairs into the stand
+    shipped = _sweep({"random": {0.0: 40, 500.0: 20}, "tmt": {0.0: 42, 500.0: 22}, "net": {0.0: 45, 500.0: 25}},
+                     static={"net": {0.0: 50, 500.0: 40}})
+    _store(evidence, "sweep", shipped, "gaitlib benchmark --magnitudes 0:500:500 --samples 50")
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"]
+    assert _prose_fits(body)
+    made = _flat(body)
+    assert ("| strategy | shipped: all pairs, 0-500 N [95%] (touches) | shipped: pace → stand, trot → stand [95%] "
+            "(touches) |") in made
+    assert f"| `random` | 60.0 {_interval(1800, 3000)} (24.0%) | 60.0 {_interval(120, 200)} (24.0%) |" in made
+    assert f"| `net` | 71.3 {_interval(2140, 3000)} (24.0%) | 90.0 {_interval(180, 200)} (24.0%) |" in made
+    assert ("Shipped: ranked by the mean over 0-500 N: `net`, `tmt`, `random`; on pace → stand, trot → stand, `net` "
+            "+26.0 points over `tmt`.") in made
+    assert f"| push, N | `random` | `tmt` | `net` | |---|---|---|---| | 0 | 80.0 {_interval(1200, 1500)} |" \
+        in made
+    assert f"| 500 | 40.0 {_interval(600, 1500)} | 44.0 {_interval(660, 1500)} | 52.0 {_interval(780, 1500)} |" in made
+    assert "robust/sweep.json` not stored yet." in made and "shipped: 50 transitions a cell, seed 0" in made
+    # the robust library sweeps two strategies only: the shipped ones it lacks are "-"
+    _store(robust, "sweep", _sweep({"random": {0.0: 45, 500.0: 45}, "net-lookahead": {0.0: 50, 500.0: 50}}))
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"])
+    assert f"| `tmt` | 64.0 {_interval(1920, 3000)} (24.0%) | - | 64.0 {_interval(128, 200)} (24.0%) | - |" in made
+    assert f"| `net-lookahead` | - | 100.0 {_interval(3000, 3000)} (24.0%) | - |" in made
+    assert "Robust: ranked by the mean over 0-500 N: `net-lookahead`, `random`." in made and "not stored" not in made
+    assert made.count("(made 2026-12-03)") == 2
+    del shipped["groups"]["tmt@500"]
+    _store(evidence, "sweep", shipped)
+    with pytest.raises(ValueError, match=r"evidence/sweep\.json does not sweep every strategy over the same push"):
+        tables.render_tables(evidence, tmp_path / "no-accuracy.json")
+
+
+def _rates(successes: list[int], samples: int = 100) -> list[dict]:
+    return [{"samples": samples, "successes": k, "rate": k / samples, "ci95": list(wilson_interval(k, samples))}
+            for k in successes]
+
+
+def test_where_the_robust_librarys_switches_fail_from_a_small_map(tmp_path: Path, evidence: Path) -> None:
+    robust = tmp_path / "robust"
+    robust.mkdir()
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map-robust"])
+    assert made == f"Not yet measured: `{robust / 'map-0n.json'}` not stored yet."
+    # two pairs, four phase bins each: trot -> walk worst at its source's second bin (60 of 100), best at its
+    # destination's last (99 of 100); an empty bin is never the best or the worst
+    pairs = []
+    for pair, source, dest, falls in (("trot-walk", [90, 60, 95, 90], [70, 80, 86, 99], [0.4, 0.9, 1.2]),
+                                      ("stand-pace", [100, 99, 98, 100], [100, 99, 98, 100], [0.5])):
+        ok = sum(source)
+        pairs.append({"pair": pair, "overall": _rates([ok], 400)[0], "bins": 4, "grid_samples": [], "grid_success": [],
+                      "by_source_phase": _rates(source) + [{"samples": 0, "successes": 0, "rate": None,
+                                                            "ci95": [0.0, 1.0]}],
+                      "by_dest_phase": _rates(dest), "by_contacts": {}, "fall_after_s": falls,
+                      "touches": _rates([20], 400)[0]})
+    _store(robust, "map-0n", {"source": "data/robust-0n.h5", "falls": "trunk", "fall_after_s_q99": 1.23,
+                              "pairs": pairs}, "gaitlib map data/robust-0n.h5 --out runs/robust-map-0n")
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map-robust"]
+    assert _prose_fits(body)
+    made = _flat(body)
+    assert made.index("| stand → pace |") < made.index("| trot → walk |")
+    assert (f"| trot → walk | 83.8 {_interval(335, 400)} of 400 | 95.0 {_interval(95, 100)} of 100 "
+            f"| 60.0 {_interval(60, 100)} of 100 | 99.0 {_interval(99, 100)} of 100 "
+            f"| 70.0 {_interval(70, 100)} of 100 | 5.0% |") in made
+    assert "a bin is 1/4 of the source's" in made and "falls by the `trunk` definition" in made and "4 switch-caused falls with a recorded time, 99% of them " \
+        "within 1.23 s of the switch." in made
+    assert "(made 2026-12-03): `gaitlib map data/robust-0n.h5 --out runs/robust-map-0n`" in made

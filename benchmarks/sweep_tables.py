@@ -1,0 +1,120 @@
+"""The paper's Fig. 4 sweep in docs/results.md: every strategy on every pair under pushes from 0 to 500 N, the
+shipped library beside the robust one. ``benchmarks/results_tables.py`` writes it into the doc with the others.
+
+The block ``sweep`` holds three tables made from ``sweep.json`` in ``docs/results/library/`` and
+``docs/results/robust/`` (evidence files like ``bench-0n.json``, one benchmark over every strategy and magnitude):
+
+- each strategy's success over every pair and magnitude (every magnitude has as many transitions as the others, so
+  the pooled rate is the paper's mean over the sweep) and over the paper's dynamic-to-static pairs
+  (:data:`TO_STATIC`), each library in its own columns, with the pooled touches;
+- each library's success per strategy and magnitude, over every pair.
+
+A library whose sweep is not stored yet is left out and named under the tables; neither stored says "not yet
+measured".
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from evidence import EVIDENCE, STRATEGIES, arrow, cite, interval, not_yet, pct, read_evidence, settings_line, shown
+from switch_tables import ROBUST
+
+from gaitlib.stats import wilson_interval
+
+__all__ = ["NAME", "PAPER_OTHERS", "TO_STATIC", "sweep_table"]
+
+NAME = "sweep"
+"""The evidence file's name in each library's folder, without ``.json``."""
+TO_STATIC = ("pace-stand", "trot-stand")
+"""The paper's dynamic-to-static pairs, on which it reports the net 19 points over the second best (Fig. 4, top)."""
+PAPER_OTHERS = ("random", "value", "tmt", "tmt-value")
+"""The strategies the paper ranks its net (``net``) against."""
+
+Counts = tuple[int, int, int]
+"""Successes, transitions and touched transitions."""
+
+
+def _by_strategy(name: str, result: dict) -> dict[str, dict[float, dict[str, dict]]]:
+    """strategy -> magnitude (N) -> its cells (pair -> counts), strategies in the tables' order."""
+    found: dict[str, dict[float, dict[str, dict]]] = {}
+    for group in result["groups"].values():
+        found.setdefault(group["strategy"], {})[float(group["magnitude_n"])] = group["cells"]
+    magnitudes = {tuple(sorted(m)) for m in found.values()}
+    if len(magnitudes) != 1:
+        raise ValueError(f"{name} does not sweep every strategy over the same push magnitudes")
+    order = {s: i for i, s in enumerate(STRATEGIES)}
+    return dict(sorted(found.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
+
+
+def _pool(cells: list[dict]) -> Counts:
+    return tuple(sum(c[k] for c in cells) for k in ("successes", "samples", "touched"))
+
+
+def _over(sweep: dict[float, dict[str, dict]], pairs: tuple[str, ...] | None = None) -> Counts:
+    """The counts over every magnitude and ``pairs`` (every pair when ``None``)."""
+    return _pool([cell for cells in sweep.values() for pair, cell in cells.items() if pairs is None or pair in pairs])
+
+
+def _share(counts: Counts) -> float:
+    return counts[0] / counts[1]
+
+
+def _rate(counts: Counts, *, touches: bool = True) -> str:
+    successes, samples, touched = counts
+    if samples == 0:
+        return "-"
+    shown = f"{pct(successes / samples)} {interval(*wilson_interval(successes, samples))}"
+    return f"{shown} ({pct(touched / samples)}%)" if touches else shown
+
+
+def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
+    """The paper's ``net`` over the best of :data:`PAPER_OTHERS` on :data:`TO_STATIC`, in points."""
+    if "net" not in sweep or not any(s in sweep for s in PAPER_OTHERS):
+        return None
+    rates = {s: _share(_over(sweep[s], TO_STATIC)) for s in ("net", *PAPER_OTHERS) if s in sweep}
+    best = max((s for s in PAPER_OTHERS if s in rates), key=rates.get)
+    points = (rates["net"] - rates[best]) * 100
+    return f"{points:+.1f} points over `{best}`"
+
+
+def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> str:
+    """``sweep``: each strategy over the whole sweep and on the dynamic-to-static pairs, then per magnitude, for
+    each library whose sweep is stored."""
+    paths = {"shipped": Path(evidence_dir) / f"{NAME}.json", "robust": Path(robust_dir) / f"{NAME}.json"}
+    stored = {library: e for library, path in paths.items() if (e := read_evidence(path)) is not None}
+    if not stored:
+        return not_yet(*paths.values())
+    sweeps = {library: _by_strategy(shown(paths[library]), e["result"]) for library, e in stored.items()}
+    strategies = list(dict.fromkeys(s for sweep in sweeps.values() for s in sweep))
+    magnitudes = sorted({m for sweep in sweeps.values() for by_m in sweep.values() for m in by_m})
+    span = f"{magnitudes[0]:g}-{magnitudes[-1]:g} N"
+    static = ", ".join(arrow(p) for p in TO_STATIC)
+    lines = ["| strategy | " + " | ".join(f"{library}: all pairs, {span} [95%] (touches)" for library in sweeps)
+             + " | " + " | ".join(f"{library}: {static} [95%] (touches)" for library in sweeps) + " |",
+             "|---|" + "---|" * (2 * len(sweeps))]
+    for strategy in strategies:
+        cells = [_rate(_over(sweep[strategy])) if strategy in sweep else "-" for sweep in sweeps.values()]
+        cells += [_rate(_over(sweep[strategy], TO_STATIC)) if strategy in sweep else "-" for sweep in sweeps.values()]
+        lines.append(f"| `{strategy}` | " + " | ".join(cells) + " |")
+    runs = "; ".join(f"{library}: {settings_line(e['result']['settings'])}" for library, e in stored.items())
+    ranks = []
+    for library, sweep in sweeps.items():
+        ranked = sorted(sweep, key=lambda s: _share(_over(sweep[s])), reverse=True)
+        margin = _margin(sweep)
+        ranks.append(f"{library.capitalize()}: ranked by the mean over {span}: " + ", ".join(f"`{s}`" for s in ranked)
+                     + (f"; on {static}, `net` {margin}." if margin else "."))
+    parts = ["\n".join(lines), f"Success % with 95% Wilson intervals over the pooled transitions, touches (a non-foot "
+             f"body on the ground, ridden through) in parentheses; {runs}. " + " ".join(ranks)]
+    for library, sweep in sweeps.items():
+        rows = ["| push, N | " + " | ".join(f"`{s}`" for s in sweep) + " |", "|---|" + "---|" * len(sweep)]
+        rows += [f"| {magnitude:g} | " + " | ".join(
+            _rate(_pool(list(by_m[magnitude].values())), touches=False) if magnitude in by_m else "-"
+            for by_m in sweep.values()) + " |" for magnitude in magnitudes]
+        parts += [f"{library.capitalize()} library, each strategy's success % over every pair at each push magnitude "
+                  "[95%]:", "\n".join(rows)]
+    absent = [path for library, path in paths.items() if library not in stored]
+    if absent:
+        parts.append(not_yet(*absent))
+    sources = [f"- {cite(paths[library], e)}" for library, e in stored.items()]
+    return "\n\n".join([*parts, "Evidence:", "\n".join(sources)])
