@@ -16,6 +16,7 @@ import pytest
 from cli_runner import gaitlib_quick
 from conftest import copy_library
 
+from gaitlib.benchmark.routes import load_routes
 from gaitlib.library import Library, library_status
 from gaitlib.library.layout import ordered_pairs, shipped_library_dir
 from gaitlib.training.recipe import Recipe
@@ -163,12 +164,16 @@ def test_the_staged_robust_library_is_the_recipe_and_the_table_its_readme_gives(
     """``library-robust`` is staged: every entry passes its schema and checksums, was trained with the recipe of its
     README's commands, and its stored evaluation is the README's table row; the walk, the bound and the pronk from the
     states of this library's own trot, pace and stand; its switching models drive all thirty pairs of the gaits as
-    they are, labelled the field's way."""
+    they are, labelled the field's way, and its route table is current and the one its stored evidence holds."""
     lib = Library(REPO / "library-robust")
     status = library_status(lib)
     assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 6
     assert status.problems == () and len(status.pairs) == 30 and set(status.pairs.values()) == {"covered"}
     assert set(status.falls().values()) == {"trunk"}
+    routes = load_routes(lib, tuple(lib.gaits()))
+    stored = json.loads((REPO / "docs" / "results" / "robust" / "routes.json").read_text())["result"]
+    assert routes.measured_with["falls"] == "trunk"
+    assert stored == json.loads((lib.switching_dir / "routes.json").read_text())
     recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
     identities = lib.identities()
     assert recipe.push_kind == "kick" and recipe.terminate == "trunk"
