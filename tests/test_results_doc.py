@@ -540,3 +540,17 @@ def test_where_the_robust_librarys_switches_fail_from_a_small_map(tmp_path: Path
     assert "a bin is 1/4 of the source's" in made and "falls by the `trunk` definition" in made and "4 switch-caused falls with a recorded time, 99% of them " \
         "within 1.23 s of the switch." in made
     assert "(made 2026-12-03): `gaitlib map data/robust-0n.h5 --out runs/robust-map-0n`" in made
+
+
+def test_the_robust_librarys_routes_are_counted_against_its_own_goal(tmp_path: Path, evidence: Path) -> None:
+    robust = tmp_path / "robust"
+    robust.mkdir()
+    for name in ("routes", "bench-direct", "bench-routed"):
+        shutil.copy(evidence / f"{name}.json", robust / f"{name}.json")
+    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")
+    # trot -> pace routed: 99.1%, the shipped goal (99%) met, the robust one (99.5%) not
+    assert f"| **99.1** {_interval(991, 1000)} |" in made["routes"] and "| at 99.0% or more | | | | 0 of 2 | 1 of 2 |" \
+        in made["routes"]
+    assert f"| 99.1 {_interval(991, 1000)} |" in made["routes-robust"]
+    assert "| at 99.5% or more | | | | 0 of 2 | 0 of 2 |" in made["routes-robust"]
+    assert "Routed, 0 of 2 pairs reach 99.5%; directly, 0." in _flat(made["routes-robust"])
