@@ -164,11 +164,15 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
     return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
 
 
+def _share(rate: dict) -> float:
+    return rate["successes"] / rate["samples"]
+
+
 def _bin(rate: dict) -> str:
     """One of a map's rates: success % with its interval and sample count."""
     if not rate["samples"]:
         return "-"
-    return f"{pct(rate['successes'] / rate['samples'])} {interval(*rate['ci95'])} of {rate['samples']:,}"
+    return f"{pct(_share(rate))} {interval(*rate['ci95'])} of {rate['samples']:,}"
 
 
 def map_table(robust_dir: Path = ROBUST) -> str:
@@ -182,11 +186,10 @@ def map_table(robust_dir: Path = ROBUST) -> str:
     lines = ["| pair | random moment [95%] | best source bin | worst source bin | best destination bin "
              "| worst destination bin | touches |", "|---|---|---|---|---|---|---|"]
     for m in maps:
-        source = sorted((r for r in m["by_source_phase"] if r["samples"]), key=lambda r: r["successes"] / r["samples"])
-        dest = sorted((r for r in m["by_dest_phase"] if r["samples"]), key=lambda r: r["successes"] / r["samples"])
-        touches = m["touches"]
-        lines.append(f"| {arrow(m['pair'])} | {_bin(m['overall'])} | {_bin(source[-1])} | {_bin(source[0])} "
-                     f"| {_bin(dest[-1])} | {_bin(dest[0])} | {pct(touches['successes'] / touches['samples'])}% |")
+        source, dest = ([r for r in m[k] if r["samples"]] for k in ("by_source_phase", "by_dest_phase"))
+        best_worst = [_bin(pick(rates, key=_share)) for rates in (source, dest) for pick in (max, min)]
+        lines.append(f"| {arrow(m['pair'])} | {_bin(m['overall'])} | " + " | ".join(best_worst)
+                     + f" | {pct(_share(m['touches']))}% |")
     bins = ", ".join(sorted({str(m["bins"]) for m in maps}))
     q99 = result.get("fall_after_s_q99")
     falls = sum(len(m["fall_after_s"]) for m in maps)
