@@ -75,9 +75,11 @@ def groups_at(result: dict, magnitude: float) -> dict[str, dict]:
 
 
 def settings_line(settings: dict) -> str:
-    """What a benchmark's cells are: size, seed and the definition of a fall."""
+    """What a benchmark's cells are: size, seed, the definition of a fall and, when not the training simulator's,
+    its robot."""
+    robot = f", robot `{settings['robot']}`" if settings.get("robot") else ""
     return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
-           "definition"
+           f"definition{robot}"
 
 
 def speed_heading_misses(evaluation: dict) -> dict[str, str]:

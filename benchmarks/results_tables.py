@@ -5,16 +5,16 @@
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``robustness-gaits``,
 ``robust-library``, ``shove-curves``, ``pairs-0n``, ``routes``, ``routes-robust``, ``pushed-and-heldout``,
-``robust-switches``, ``map-robust``, ``sweep``, ``net-accuracy``, ``net-accuracy-robust``; the gaits' robustness tables
-are made in ``benchmarks/robustness_tables.py``, the switches pushed, on another A1 and in the robust library in
-``benchmarks/switch_tables.py``, the paper's sweep of pushes in ``benchmarks/sweep_tables.py``, what they share is
-``benchmarks/evidence.py``). Everything between the two is made here from the evidence and nothing else, so a figure
-edited by hand, or a stored result replaced without rewriting the doc, makes ``--check`` fail (tests/test_results_doc.py
-runs it). The evidence: ``docs/results/library/*.json``, each ``{"command": the exact command that made it, "made":
-"YYYY-MM-DD", "result": its raw output}``, the robust library's beside them (``docs/results/robust/``), the robust
-recipe's ablation rows (``docs/results/ablation/``), and the library's own ``library/switching/accuracy.json``
-(``library-robust/switching/accuracy.json`` for the robust one). A table whose evidence is not stored yet says "not yet
-measured".
+``robust-switches``, ``map-robust``, ``sweep``, ``strategies-menagerie``, ``net-accuracy``, ``net-accuracy-robust``; the
+gaits' robustness tables are made in ``benchmarks/robustness_tables.py``, the switches pushed, on another A1 and in the
+robust library in ``benchmarks/switch_tables.py``, the paper's Fig. 4 (every strategy) in
+``benchmarks/sweep_tables.py``, what they share is ``benchmarks/evidence.py``). Everything between the two is made here
+from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the doc,
+makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
+``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust library's
+beside them (``docs/results/robust/``), the robust recipe's ablation rows (``docs/results/ablation/``), and the
+library's own ``library/switching/accuracy.json`` (``library-robust/switching/accuracy.json`` for the robust one). A
+table whose evidence is not stored yet says "not yet measured".
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ from evidence import (
     speed_heading_misses,
 )
 from robustness_tables import library_table, robustness_table, shove_table
-from sweep_tables import sweep_table
+from sweep_tables import HELD_OUT, sweep_table
 from switch_tables import SWITCH_GOALS, map_table, pushed_table, switches_table
 
 from gaitlib.atomic import atomic_path
@@ -64,7 +64,8 @@ ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 ROBUST_ACCURACY = ROOT / "library-robust" / "switching" / "accuracy.json"
 """The robust library's transition-net's accuracy report."""
 TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes", "routes-robust",
-          "pushed-and-heldout", "robust-switches", "map-robust", "sweep", "net-accuracy", "net-accuracy-robust")
+          "pushed-and-heldout", "robust-switches", "map-robust", "sweep", "strategies-menagerie", "net-accuracy",
+          "net-accuracy-robust")
 """The generated blocks, in the doc's order."""
 GOAL = 0.99
 """The success a switch is counted against."""
@@ -306,6 +307,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "routes-robust": routes_table(robust, goal=ROBUST_GOAL), "pushed-and-heldout": pushed_table(evidence_dir),
               "robust-switches": switches_table(evidence_dir, robust), "map-robust": map_table(robust),
               "sweep": sweep_table(evidence_dir, robust),
+              "strategies-menagerie": sweep_table(evidence_dir, robust, name=HELD_OUT),
               "net-accuracy": accuracy_table(accuracy), "net-accuracy-robust": accuracy_table(robust_accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 

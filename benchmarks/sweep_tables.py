@@ -1,15 +1,18 @@
-"""The paper's Fig. 4 sweep in docs/results.md: every strategy on every pair under pushes from 0 to 500 N, the
-shipped library beside the robust one. ``benchmarks/results_tables.py`` writes it into the doc with the others.
+"""The paper's Fig. 4 in docs/results.md: every strategy on every pair under pushes from 0 to 500 N (its top), and
+without pushes on another A1 (its bottom, the real robot there), the shipped library beside the robust one.
+``benchmarks/results_tables.py`` writes them into the doc with the others.
 
-The block ``sweep`` holds three tables made from ``sweep.json`` in ``docs/results/library/`` and
-``docs/results/robust/`` (evidence files like ``bench-0n.json``, one benchmark over every strategy and magnitude):
+Each block is made from one evidence file in ``docs/results/library/`` and in ``docs/results/robust/`` (like
+``bench-0n.json``, one benchmark over every strategy and magnitude): ``sweep`` from ``sweep.json``,
+``strategies-menagerie`` from ``menagerie-strategies.json`` (MuJoCo Menagerie's A1 at 0 N). Each holds
 
 - each strategy's success over every pair and magnitude (every magnitude has as many transitions as the others, so
   the pooled rate is the paper's mean over the sweep) and over the paper's dynamic-to-static pairs
-  (:data:`TO_STATIC`), each library in its own columns, with the pooled touches;
-- each library's success per strategy and magnitude, over every pair.
+  (:data:`TO_STATIC`), each library in its own columns, with the pooled touches, the ranking and the paper's net's
+  margin over its other strategies;
+- when more than one magnitude is swept, each library's success per strategy and magnitude, over every pair.
 
-A library whose sweep is not stored yet is left out and named under the tables; neither stored says "not yet
+A library whose evidence is not stored yet is left out and named under the tables; neither stored says "not yet
 measured".
 """
 
@@ -22,10 +25,12 @@ from switch_tables import ROBUST
 
 from gaitlib.stats import wilson_interval
 
-__all__ = ["NAME", "PAPER_OTHERS", "TO_STATIC", "sweep_table"]
+__all__ = ["HELD_OUT", "NAME", "PAPER_OTHERS", "TO_STATIC", "sweep_table"]
 
 NAME = "sweep"
-"""The evidence file's name in each library's folder, without ``.json``."""
+"""The sweep's evidence file's name in each library's folder, without ``.json``."""
+HELD_OUT = "menagerie-strategies"
+"""The evidence file's name of every strategy on MuJoCo Menagerie's A1, without ``.json``."""
 TO_STATIC = ("pace-stand", "trot-stand")
 """The paper's dynamic-to-static pairs, on which it reports the net 19 points over the second best (Fig. 4, top)."""
 PAPER_OTHERS = ("random", "value", "tmt", "tmt-value")
@@ -78,17 +83,18 @@ def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
     return f"{points:+.1f} points over `{best}`"
 
 
-def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> str:
-    """``sweep``: each strategy over the whole sweep and on the dynamic-to-static pairs, then per magnitude, for
-    each library whose sweep is stored."""
-    paths = {"shipped": Path(evidence_dir) / f"{NAME}.json", "robust": Path(robust_dir) / f"{NAME}.json"}
+def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, name: str = NAME) -> str:
+    """Each strategy over every pair and magnitude of the evidence ``name`` and on the dynamic-to-static pairs, then,
+    when it sweeps more than one magnitude, per magnitude, for each library whose evidence is stored."""
+    paths = {"shipped": Path(evidence_dir) / f"{name}.json", "robust": Path(robust_dir) / f"{name}.json"}
     stored = {library: e for library, path in paths.items() if (e := read_evidence(path)) is not None}
     if not stored:
         return not_yet(*paths.values())
     sweeps = {library: _by_strategy(shown(paths[library]), e["result"]) for library, e in stored.items()}
     strategies = list(dict.fromkeys(s for sweep in sweeps.values() for s in sweep))
     magnitudes = sorted({m for sweep in sweeps.values() for by_m in sweep.values() for m in by_m})
-    span = f"{magnitudes[0]:g}-{magnitudes[-1]:g} N"
+    span = f"{magnitudes[0]:g}-{magnitudes[-1]:g} N" if len(magnitudes) > 1 else f"{magnitudes[0]:g} N"
+    where = f"over {span}" if len(magnitudes) > 1 else f"at {span}"
     static = ", ".join(arrow(p) for p in TO_STATIC)
     lines = ["| strategy | " + " | ".join(f"{library}: all pairs, {span} [95%] (touches)" for library in sweeps)
              + " | " + " | ".join(f"{library}: {static} [95%] (touches)" for library in sweeps) + " |",
@@ -102,11 +108,11 @@ def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> str
     for library, sweep in sweeps.items():
         ranked = sorted(sweep, key=lambda s: _share(_over(sweep[s])), reverse=True)
         margin = _margin(sweep)
-        ranks.append(f"{library.capitalize()}: ranked by the mean over {span}: " + ", ".join(f"`{s}`" for s in ranked)
+        ranks.append(f"{library.capitalize()}: ranked by success {where}: " + ", ".join(f"`{s}`" for s in ranked)
                      + (f"; on {static}, `net` {margin}." if margin else "."))
     parts = ["\n".join(lines), f"Success % with 95% Wilson intervals over the pooled transitions, touches (a non-foot "
              f"body on the ground, ridden through) in parentheses; {runs}. " + " ".join(ranks)]
-    for library, sweep in sweeps.items():
+    for library, sweep in sweeps.items() if len(magnitudes) > 1 else ():
         rows = ["| push, N | " + " | ".join(f"`{s}`" for s in sweep) + " |", "|---|" + "---|" * len(sweep)]
         rows += [f"| {magnitude:g} | " + " | ".join(
             _rate(_pool(list(by_m[magnitude].values())), touches=False) if magnitude in by_m else "-"

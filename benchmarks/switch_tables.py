@@ -79,11 +79,6 @@ def _success(cell: dict | None, goal: float) -> str:
     return f"{_rate(cell, goal)} | {pct(cell['touched'] / cell['samples'])}%"
 
 
-def _run(settings: dict) -> str:
-    """A benchmark's size, seed, definition of a fall and, when not the training simulator's, its robot."""
-    return settings_line(settings) + (f", robot `{settings['robot']}`" if settings.get("robot") else "")
-
-
 def _pooled(cells: dict[str, dict]) -> tuple[int, int, int]:
     """Successes, transitions and touched transitions over every pair."""
     return tuple(sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched"))
@@ -117,7 +112,7 @@ def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
     notes = []
     for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
         notes.append(f"{title}: {k} of {len(cells)} pairs reach {pct(goal)}%; `{STRATEGY}`, "
-                     f"{_run(evidence['result']['settings'])}.")
+                     f"{settings_line(evidence['result']['settings'])}.")
     absent = [paths[name] for name, e in stored.items() if e is None]
     if absent:
         notes.append(not_yet(*absent))
@@ -152,7 +147,8 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
     for goal in goals:
         counts = [f"{library} {_reached(cells, goal.goal)} of {len(cells)}"
                   for g, library, cells in columns if g is goal and cells]
-        runs = {library: _run(e["result"]["settings"]) for library in folders if (e := stored[library, goal.name])}
+        runs = {library: settings_line(e["result"]["settings"]) for library in folders
+                if (e := stored[library, goal.name])}
         same = len(runs) > 1 and len(set(runs.values())) == 1
         run = f"each library: {runs['robust']}" if same else "; ".join(f"{k}: {v}" for k, v in runs.items())
         notes.append(f"{goal.title} (goal {pct(goal.goal)}% on every pair): {', '.join(counts)}; {run}.")
