@@ -80,7 +80,7 @@ def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
     rates = {s: _share(_over(sweep[s], TO_STATIC)) for s in ("net", *PAPER_OTHERS) if s in sweep}
     best = max((s for s in PAPER_OTHERS if s in rates), key=rates.get)
     points = (rates["net"] - rates[best]) * 100
-    return f"{points:+.1f} points over `{best}`"
+    return f"{points:+.1f} points from the best of the paper's other strategies, `{best}`"
 
 
 def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, name: str = NAME) -> str:
@@ -103,15 +103,17 @@ def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, nam
         cells = [_rate(_over(sweep[strategy])) if strategy in sweep else "-" for sweep in sweeps.values()]
         cells += [_rate(_over(sweep[strategy], TO_STATIC)) if strategy in sweep else "-" for sweep in sweeps.values()]
         lines.append(f"| `{strategy}` | " + " | ".join(cells) + " |")
-    runs = "; ".join(f"{library}: {settings_line(e['result']['settings'])}" for library, e in stored.items())
+    runs = {library: settings_line(e["result"]["settings"]) for library, e in stored.items()}
+    run = (f"each library: {next(iter(runs.values()))}" if len(runs) > 1 and len(set(runs.values())) == 1
+           else "; ".join(f"{library}: {line}" for library, line in runs.items()))
     ranks = []
     for library, sweep in sweeps.items():
         ranked = sorted(sweep, key=lambda s: _share(_over(sweep[s])), reverse=True)
         margin = _margin(sweep)
         ranks.append(f"{library.capitalize()}: ranked by success {where}: " + ", ".join(f"`{s}`" for s in ranked)
-                     + (f"; on {static}, `net` {margin}." if margin else "."))
+                     + (f"; on {static}, `net` is {margin}." if margin else "."))
     parts = ["\n".join(lines), f"Success % with 95% Wilson intervals over the pooled transitions, touches (a non-foot "
-             f"body on the ground, ridden through) in parentheses; {runs}. " + " ".join(ranks)]
+             f"body on the ground, ridden through) in parentheses; {run}. " + " ".join(ranks)]
     for library, sweep in sweeps.items() if len(magnitudes) > 1 else ():
         rows = ["| push, N | " + " | ".join(f"`{s}`" for s in sweep) + " |", "|---|" + "---|" * len(sweep)]
         rows += [f"| {magnitude:g} | " + " | ".join(
