@@ -232,3 +232,14 @@ def test_feet_stay_on_top_of_the_ground_whatever_the_friction(make) -> None:
     assert torch.all(s.foot_pos[..., 2] > a1.FOOT_RADIUS - 0.004)  # sunk at most 4 mm
     assert (s.root_pos[0, 2] - s.root_pos[1, 2]).abs() < 0.003
     assert not s.body_contact.any()
+
+
+def test_closing_drops_the_worlds_even_while_the_backend_is_still_referred_to(make) -> None:
+    """close() lets the worlds go itself, whatever still refers to the backend (an environment in a reference
+    cycle keeps it until Python's collector runs): only what names the backend stays; a second close is
+    harmless."""
+    sim = make(2)
+    sim.step()
+    sim.close()
+    assert set(vars(sim)) == {"robot", "num_worlds", "device"}
+    sim.close()
