@@ -69,15 +69,17 @@ def _rate(counts: Counts, *, touches: bool = True) -> str:
     successes, samples, touched = counts
     if samples == 0:
         return "-"
-    shown = f"{pct(successes / samples)} {interval(*wilson_interval(successes, samples))}"
-    return f"{shown} ({pct(touched / samples)}%)" if touches else shown
+    text = f"{pct(successes / samples)} {interval(*wilson_interval(successes, samples))}"
+    return f"{text} ({pct(touched / samples)}%)" if touches else text
 
 
 def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
-    """The paper's ``net`` over the best of :data:`PAPER_OTHERS` on :data:`TO_STATIC`, in points."""
-    if "net" not in sweep or not any(s in sweep for s in PAPER_OTHERS):
+    """The paper's ``net`` over the best of :data:`PAPER_OTHERS` on :data:`TO_STATIC`, in points; ``None`` when the
+    sweep lacks ``net``, the others or those pairs."""
+    counts = {s: _over(sweep[s], TO_STATIC) for s in ("net", *PAPER_OTHERS) if s in sweep}
+    if "net" not in counts or len(counts) == 1 or not all(c[1] for c in counts.values()):
         return None
-    rates = {s: _share(_over(sweep[s], TO_STATIC)) for s in ("net", *PAPER_OTHERS) if s in sweep}
+    rates = {s: _share(c) for s, c in counts.items()}
     best = max((s for s in PAPER_OTHERS if s in rates), key=rates.get)
     points = (rates["net"] - rates[best]) * 100
     return f"{points:+.1f} points from the best of the paper's other strategies, `{best}`"

@@ -576,3 +576,10 @@ def test_every_strategy_on_another_a1_from_small_evidence(tmp_path: Path, eviden
     assert "Robust: ranked by success at 0 N: `net`, `random`; on pace → stand, trot → stand, `net` is +6.0 " \
            "points from the best of the paper's other strategies, `random`." in made
     assert "| push, N |" not in made and "evidence/menagerie-strategies.json` not stored yet." in made
+    # a sweep of other pairs only: no margin on the dynamic-to-static pairs, their columns "-"
+    for group in held["groups"].values():
+        for pair in ("pace-stand", "trot-stand"):
+            del group["cells"][pair]
+    _store(robust, "menagerie-strategies", held)
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["strategies-menagerie"])
+    assert f"| `net` | 96.0 {_interval(1344, 1400)} (24.0%) | - |" in made and "`net` is" not in made
