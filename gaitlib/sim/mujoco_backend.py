@@ -34,8 +34,8 @@ _log = logging.getLogger(__name__)
 def _trim_heap() -> None:
     """Return the C heap's free memory to the system (glibc's ``malloc_trim``; nothing where there is none). glibc
     keeps what a closed backend's worlds freed, many blocks of MuJoCo's own, and a process that builds backend after
-    backend (a benchmark's groups) grew by about 160 MB a backend of 256 worlds without it
-    (``benchmarks/backend_memory.py``)."""
+    backend (a benchmark's groups) grew by every one without it: 11 GB over the paper's 66-group sweep
+    (``benchmarks/backend_memory.py`` measures it)."""
     trim = getattr(ctypes.CDLL(None), "malloc_trim", None)
     if trim is not None:
         trim(0)
