@@ -1,17 +1,19 @@
-"""What the tables of docs/results.md share: where the stored evidence is, how a file of it is read and cited, and
-how a rate, an interval, a pair and a benchmark's settings are written (``benchmarks/results_tables.py``,
-``benchmarks/robustness_tables.py`` and ``benchmarks/switch_tables.py`` make the tables)."""
+"""What the tables of docs/results.md share: where the stored evidence is, how a file of it is read and cited, how
+a rate, an interval, a pair and a benchmark's settings are written, and how a benchmark's counts are pooled
+(``benchmarks/results_tables.py``, ``benchmarks/robustness_tables.py``, ``benchmarks/switch_tables.py`` and
+``benchmarks/sweep_tables.py`` make the tables)."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 __all__ = [
     "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
-    "arrow", "cite", "groups_at", "interval", "not_yet", "pct", "read_evidence", "settings_line", "shown",
-    "speed_heading_misses",
+    "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled", "read_evidence",
+    "settings_line", "shown", "speed_heading_misses",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,6 +82,19 @@ def settings_line(settings: dict) -> str:
     robot = f", robot `{settings['robot']}`" if settings.get("robot") else ""
     return f"{settings['samples']:,} transitions a cell, seed {settings['seed']}; falls by the `{settings['falls']}` " \
            f"definition{robot}"
+
+
+def libraries_line(lines: dict[str, str]) -> str:
+    """Each library's :func:`settings_line` (library -> line), once as "each library: ..." when they agree."""
+    if len(lines) > 1 and len(set(lines.values())) == 1:
+        return f"each library: {next(iter(lines.values()))}"
+    return "; ".join(f"{library}: {line}" for library, line in lines.items())
+
+
+def pooled(cells: Iterable[dict]) -> tuple[int, int, int]:
+    """Successes, transitions and touched transitions over ``cells`` (a benchmark's counts)."""
+    cells = list(cells)
+    return tuple(sum(c[k] for c in cells) for k in ("successes", "samples", "touched"))
 
 
 def speed_heading_misses(evaluation: dict) -> dict[str, str]:

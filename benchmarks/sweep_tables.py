@@ -20,7 +20,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from evidence import EVIDENCE, STRATEGIES, arrow, cite, interval, not_yet, pct, read_evidence, settings_line, shown
+from evidence import (
+    EVIDENCE,
+    arrow,
+    cite,
+    groups_at,
+    interval,
+    libraries_line,
+    not_yet,
+    pct,
+    pooled,
+    read_evidence,
+    settings_line,
+    shown,
+)
 from switch_tables import ROBUST
 
 from gaitlib.stats import wilson_interval
@@ -43,22 +56,17 @@ Counts = tuple[int, int, int]
 def _by_strategy(name: str, result: dict) -> dict[str, dict[float, dict[str, dict]]]:
     """strategy -> magnitude (N) -> its cells (pair -> counts), strategies in the tables' order."""
     found: dict[str, dict[float, dict[str, dict]]] = {}
-    for group in result["groups"].values():
-        found.setdefault(group["strategy"], {})[float(group["magnitude_n"])] = group["cells"]
-    magnitudes = {tuple(sorted(m)) for m in found.values()}
-    if len(magnitudes) != 1:
+    for magnitude in sorted({float(g["magnitude_n"]) for g in result["groups"].values()}):
+        for strategy, cells in groups_at(result, magnitude).items():
+            found.setdefault(strategy, {})[magnitude] = cells
+    if len({tuple(m) for m in found.values()}) != 1:
         raise ValueError(f"{name} does not sweep every strategy over the same push magnitudes")
-    order = {s: i for i, s in enumerate(STRATEGIES)}
-    return dict(sorted(found.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
-
-
-def _pool(cells: list[dict]) -> Counts:
-    return tuple(sum(c[k] for c in cells) for k in ("successes", "samples", "touched"))
+    return found
 
 
 def _over(sweep: dict[float, dict[str, dict]], pairs: tuple[str, ...] | None = None) -> Counts:
     """The counts over every magnitude and ``pairs`` (every pair when ``None``)."""
-    return _pool([cell for cells in sweep.values() for pair, cell in cells.items() if pairs is None or pair in pairs])
+    return pooled(cell for cells in sweep.values() for pair, cell in cells.items() if pairs is None or pair in pairs)
 
 
 def _share(counts: Counts) -> float:
@@ -105,9 +113,7 @@ def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, nam
         cells = [_rate(_over(sweep[strategy])) if strategy in sweep else "-" for sweep in sweeps.values()]
         cells += [_rate(_over(sweep[strategy], TO_STATIC)) if strategy in sweep else "-" for sweep in sweeps.values()]
         lines.append(f"| `{strategy}` | " + " | ".join(cells) + " |")
-    runs = {library: settings_line(e["result"]["settings"]) for library, e in stored.items()}
-    run = (f"each library: {next(iter(runs.values()))}" if len(runs) > 1 and len(set(runs.values())) == 1
-           else "; ".join(f"{library}: {line}" for library, line in runs.items()))
+    run = libraries_line({library: settings_line(e["result"]["settings"]) for library, e in stored.items()})
     ranks = []
     for library, sweep in sweeps.items():
         ranked = sorted(sweep, key=lambda s: _share(_over(sweep[s])), reverse=True)
@@ -119,7 +125,7 @@ def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, nam
     for library, sweep in sweeps.items() if len(magnitudes) > 1 else ():
         rows = ["| push, N | " + " | ".join(f"`{s}`" for s in sweep) + " |", "|---|" + "---|" * len(sweep)]
         rows += [f"| {magnitude:g} | " + " | ".join(
-            _rate(_pool(list(by_m[magnitude].values())), touches=False) if magnitude in by_m else "-"
+            _rate(pooled(by_m[magnitude].values()), touches=False) if magnitude in by_m else "-"
             for by_m in sweep.values()) + " |" for magnitude in magnitudes]
         parts += [f"{library.capitalize()} library, each strategy's success % over every pair at each push magnitude "
                   "[95%]:", "\n".join(rows)]

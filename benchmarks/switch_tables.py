@@ -20,7 +20,20 @@ from __future__ import annotations
 from pathlib import Path
 from typing import NamedTuple
 
-from evidence import EVIDENCE, ROOT, arrow, cite, groups_at, interval, not_yet, pct, read_evidence, settings_line
+from evidence import (
+    EVIDENCE,
+    ROOT,
+    arrow,
+    cite,
+    groups_at,
+    interval,
+    libraries_line,
+    not_yet,
+    pct,
+    pooled,
+    read_evidence,
+    settings_line,
+)
 
 from gaitlib.stats import wilson_interval
 
@@ -79,11 +92,6 @@ def _success(cell: dict | None, goal: float) -> str:
     return f"{_rate(cell, goal)} | {pct(cell['touched'] / cell['samples'])}%"
 
 
-def _pooled(cells: dict[str, dict]) -> tuple[int, int, int]:
-    """Successes, transitions and touched transitions over every pair."""
-    return tuple(sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched"))
-
-
 def _reached(cells: dict[str, dict], goal: float) -> int:
     return sum(c["successes"] >= goal * c["samples"] for c in cells.values())
 
@@ -102,9 +110,9 @@ def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
              "|---|" + "---|---|" * len(found)]
     lines += [f"| {arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
               for p in pairs]
-    pooled = [_pooled(cells) for _, cells, _, _ in found]
+    pooled_counts = [pooled(cells.values()) for _, cells, _, _ in found]
     lines.append("| all pairs | " + " | ".join(f"{pct(s / n)} {interval(*wilson_interval(s, n))} | {pct(t / n)}%"
-                                                for s, n, t in pooled) + " |")
+                                                for s, n, t in pooled_counts) + " |")
     reached = [_reached(cells, goal) for _, cells, goal, _ in found]
     lines.append("| pairs at the goal or more | " + " | ".join(
         f"{k} of {len(cells)} (goal {pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
@@ -137,10 +145,10 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
              "|---|" + "---|" * len(columns)]
     lines += [f"| {arrow(p)} | " + " | ".join(_rate(cells.get(p) if cells else None, g.goal) for g, _, cells in columns)
               + " |" for p in pairs]
-    pooled = [_pooled(cells) if cells else None for *_, cells in columns]
+    pooled_counts = [pooled(cells.values()) if cells else None for *_, cells in columns]
     lines.append("| all pairs (touches) | " + " | ".join(
         "-" if p is None else f"{pct(p[0] / p[1])} {interval(*wilson_interval(p[0], p[1]))} ({pct(p[2] / p[1])}%)"
-        for p in pooled) + " |")
+        for p in pooled_counts) + " |")
     lines.append("| pairs at the goal or more | " + " | ".join(
         "-" if cells is None else f"{_reached(cells, g.goal)} of {len(cells)}" for g, _, cells in columns) + " |")
     notes = []
@@ -149,9 +157,8 @@ def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> 
                   for g, library, cells in columns if g is goal and cells]
         runs = {library: settings_line(e["result"]["settings"]) for library in folders
                 if (e := stored[library, goal.name])}
-        same = len(runs) > 1 and len(set(runs.values())) == 1
-        run = f"each library: {runs['robust']}" if same else "; ".join(f"{k}: {v}" for k, v in runs.items())
-        notes.append(f"{goal.title} (goal {pct(goal.goal)}% on every pair): {', '.join(counts)}; {run}.")
+        notes.append(f"{goal.title} (goal {pct(goal.goal)}% on every pair): {', '.join(counts)}; "
+                     f"{libraries_line(runs)}.")
     absent = [paths["robust", name] for name in names if stored["robust", name] is None]
     if absent:
         notes.append(not_yet(*absent))
