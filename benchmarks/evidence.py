@@ -12,14 +12,17 @@ from pathlib import Path
 
 __all__ = [
     "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
-    "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled", "read_evidence",
-    "settings_line", "shown", "speed_heading_misses",
+    "SWITCH_START", "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
+    "read_evidence", "settings_line", "shown", "speed_heading_misses",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
 """The repository."""
 EVIDENCE = ROOT / "docs" / "results" / "library"
-"""The stored raw results of the shipped library."""
+"""The stored raw results of the shipped library (the robust recipe's)."""
+SWITCH_START = ROOT / "docs" / "results" / "switch-start"
+"""The stored raw results of the library shipped before it, ``library-switch-start/`` (the paper's recipe with
+switch-start training), named as the shipped library's are."""
 GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
 """The shipped gaits, in the order the tables list them."""
 BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0

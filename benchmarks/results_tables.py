@@ -3,18 +3,16 @@
     python benchmarks/results_tables.py            # rewrite the generated blocks of docs/results.md
     python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
 
-Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: ``quality-bar``, ``robustness-gaits``,
-``robust-library``, ``shove-curves``, ``pairs-0n``, ``routes``, ``routes-robust``, ``pushed-and-heldout``,
-``robust-switches``, ``map-robust``, ``sweep``, ``strategies-menagerie``, ``net-accuracy``, ``net-accuracy-robust``; the
-gaits' robustness tables are made in ``benchmarks/robustness_tables.py``, the switches pushed, on another A1 and in the
-robust library in ``benchmarks/switch_tables.py``, the paper's Fig. 4 (every strategy) in
+Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: one of :data:`TABLES`; the gaits'
+robustness tables are made in ``benchmarks/robustness_tables.py``, the switches of both libraries under pushes and on
+another A1 and the transition map in ``benchmarks/switch_tables.py``, the paper's Fig. 4 (every strategy) in
 ``benchmarks/sweep_tables.py``, what they share is ``benchmarks/evidence.py``). Everything between the two is made here
 from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the doc,
 makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
-``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, the robust library's
-beside them (``docs/results/robust/``), the robust recipe's ablation rows (``docs/results/ablation/``), and the
-library's own ``library/switching/accuracy.json`` (``library-robust/switching/accuracy.json`` for the robust one). A
-table whose evidence is not stored yet says "not yet measured".
+``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, those of the library
+shipped before it beside them (``docs/results/switch-start/``), the robust recipe's ablation rows
+(``docs/results/ablation/``), and each library's own ``switching/accuracy.json``. A table whose evidence is not stored
+yet says "not yet measured".
 """
 
 from __future__ import annotations
@@ -46,13 +44,13 @@ from evidence import (
 )
 from robustness_tables import library_table, robustness_table, shove_table
 from sweep_tables import HELD_OUT, sweep_table
-from switch_tables import SWITCH_GOALS, map_table, pushed_table, switches_table
+from switch_tables import SWITCH_GOALS, map_table, switches_table
 
 from gaitlib.atomic import atomic_path
 from gaitlib.stats import wilson_interval
 
 __all__ = [
-    "ACCURACY", "DOC", "EVIDENCE", "ROBUST_ACCURACY", "TABLES", "accuracy_table", "check_doc", "fill",
+    "ACCURACY", "DOC", "EVIDENCE", "SWITCH_START_ACCURACY", "TABLES", "accuracy_table", "check_doc", "fill",
     "first_difference", "main", "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table",
     "write_doc",
 ]
@@ -61,16 +59,17 @@ DOC = ROOT / "docs" / "results.md"
 """The doc whose generated blocks these tables are."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
-ROBUST_ACCURACY = ROOT / "library-robust" / "switching" / "accuracy.json"
-"""The robust library's transition-net's accuracy report."""
-TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes", "routes-robust",
-          "pushed-and-heldout", "robust-switches", "map-robust", "sweep", "strategies-menagerie", "net-accuracy",
-          "net-accuracy-robust")
+SWITCH_START_ACCURACY = ROOT / "library-switch-start" / "switching" / "accuracy.json"
+"""The accuracy report of the transition-net of the library shipped before (switch-start)."""
+TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes",
+          "routes-switch-start", "switches", "map", "sweep", "strategies-menagerie", "net-accuracy",
+          "net-accuracy-switch-start")
 """The generated blocks, in the doc's order."""
 GOAL = 0.99
-"""The success a switch is counted against."""
+"""The success a switch is counted against (the switch-start library's routes)."""
 ROBUST_GOAL = next(g.goal for g in SWITCH_GOALS if (g.name, g.strategy) == ("bench-0n", "net-lookahead"))
-"""The robust recipe's goal for a switch at 0 N with ``net-lookahead``, which its routes are counted against."""
+"""The robust recipe's goal for a switch at 0 N with ``net-lookahead``, which the shipped library's routes are counted
+against."""
 PAPER_PAIRS = ("stand-pace", "stand-trot", "pace-trot", "pace-stand", "trot-pace", "trot-stand")
 """The paper's six pairs, in its Table 3 column order."""
 INPUTS = ("latent", "explicit", "phase")
@@ -297,18 +296,18 @@ def _wrap(body: str) -> str:
 
 
 def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
-                  robust_accuracy: Path = ROBUST_ACCURACY) -> dict[str, str]:
+                  switch_start_accuracy: Path = SWITCH_START_ACCURACY) -> dict[str, str]:
     """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
-    ``ablation`` beside ``evidence_dir``, the robust library's evidence from ``robust`` beside it."""
-    ablation, robust = Path(evidence_dir).parent / "ablation", Path(evidence_dir).parent / "robust"
+    ``ablation`` beside ``evidence_dir``, the switch-start library's evidence from ``switch-start`` beside it."""
+    ablation, earlier = Path(evidence_dir).parent / "ablation", Path(evidence_dir).parent / "switch-start"
     tables = {"quality-bar": quality_bar(evidence_dir), "robustness-gaits": robustness_table(ablation),
-              "robust-library": library_table(ablation), "shove-curves": shove_table(evidence_dir, ablation),
-              "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir),
-              "routes-robust": routes_table(robust, goal=ROBUST_GOAL), "pushed-and-heldout": pushed_table(evidence_dir),
-              "robust-switches": switches_table(evidence_dir, robust), "map-robust": map_table(robust),
-              "sweep": sweep_table(evidence_dir, robust),
-              "strategies-menagerie": sweep_table(evidence_dir, robust, name=HELD_OUT),
-              "net-accuracy": accuracy_table(accuracy), "net-accuracy-robust": accuracy_table(robust_accuracy)}
+              "robust-library": library_table(ablation), "shove-curves": shove_table(ablation),
+              "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir, goal=ROBUST_GOAL),
+              "routes-switch-start": routes_table(earlier), "switches": switches_table(earlier, evidence_dir),
+              "map": map_table(evidence_dir), "sweep": sweep_table(earlier, evidence_dir),
+              "strategies-menagerie": sweep_table(earlier, evidence_dir, name=HELD_OUT),
+              "net-accuracy": accuracy_table(accuracy),
+              "net-accuracy-switch-start": accuracy_table(switch_start_accuracy)}
     return {name: _wrap(body) for name, body in tables.items()}
 
 

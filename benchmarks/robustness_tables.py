@@ -3,14 +3,14 @@
 the others.
 
 - ``robustness-gaits``: the robust recipe's ablation, ``docs/results/ablation/GAIT-VARIANT.json`` for each gait of
-  :data:`ABLATION_GAITS` (``GAIT-today.json``: the shipped gait, today's recipe), each ``{"command", "result"}`` as
+  :data:`ABLATION_GAITS` (``GAIT-today.json``: the switch-start library's gait, today's recipe: the recipe before
+  the ablation), each ``{"command", "result"}`` as
   ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``): falls and leg touches with
   their 95% intervals, each row's recipe, and each row against :data:`BARS` and :data:`GAIT_BARS`, read from its
   numbers.
-- ``robust-library``: each of the six gaits with today's recipe (``GAIT-today.json``) beside the same gait in
-  ``library-robust/`` (``GAIT-`` :data:`CHOSEN` ``.json``), each against every bar.
-- ``shove-curves``: every gait's falls under one shove of each impulse, from its ablation row, else from
-  ``docs/results/library/shove-GAIT.json`` (``gaitlib eval GAIT --impulses ... --json``).
+- ``robust-library``: each of the six gaits with today's recipe (``GAIT-today.json``, ``library-switch-start/``)
+  beside the same gait in the shipped library (``GAIT-`` :data:`CHOSEN` ``.json``), each against every bar.
+- ``shove-curves``: every gait's falls under one shove of each impulse in both libraries, from the same rows.
 
 A table whose evidence is not stored yet says "not yet measured", one file missing of several says which.
 """
@@ -23,7 +23,6 @@ from pathlib import Path
 from evidence import (
     BAR_HEADING_DEG,
     BAR_SPEED,
-    EVIDENCE,
     GAITS,
     HEADING_BAR,
     ROOT,
@@ -32,8 +31,7 @@ from evidence import (
     interval,
     not_yet,
     pct,
-    read_evidence,
-    speed_heading_misses,
+        speed_heading_misses,
 )
 
 from gaitlib.training.recipe import Recipe
@@ -44,12 +42,16 @@ __all__ = [
 ]
 
 ABLATION = ROOT / "docs" / "results" / "ablation"
-"""The robust recipe's ablation rows: ``GAIT-VARIANT.json``, ``today`` the shipped gaits as trained."""
+"""The robust recipe's ablation rows: ``GAIT-VARIANT.json``, ``today`` the switch-start library's gaits as
+trained."""
 ABLATION_GAITS = ("pace", "trot")
 """The gaits of the ablation's baseline, in the table's order."""
 CHOSEN = "gamma-kick-trunk-touch5"
-"""The variant the ablation chose (docs/results.md, "How the rebuild's recipe is chosen"), the recipe of
-``library-robust/``: each gait's row of it is ``GAIT-gamma-kick-trunk-touch5.json``."""
+"""The variant the ablation chose (docs/results.md, "How the rebuild's recipe is chosen"), the recipe of the
+shipped library: each gait's row of it is ``GAIT-gamma-kick-trunk-touch5.json``."""
+LIBRARIES = (("today", "switch-start"), (CHOSEN, "robust"))
+"""Each library's variant of the ablation rows and its name in the tables: the library shipped before
+(``library-switch-start/``), then the shipped one (``library/``)."""
 SHOVES = (6.0, 12.0, 18.0)
 """The single shoves tabled, N s."""
 SHOVE_UP_TO_NS = 12.0
@@ -261,26 +263,25 @@ def _library_row(gait: str, library: str, row: dict, met: str) -> str:
 
 
 def library_table(ablation_dir: Path = ABLATION) -> str:
-    """``robust-library``: each gait of :data:`GAITS` trained with today's recipe (the shipped library,
-    ``GAIT-today.json``) and with the :data:`CHOSEN` one (``library-robust/``), side by side against the bars; the
-    touches of both judged against the shipped gait's."""
-    libraries = (("today", "shipped"), (CHOSEN, "`library-robust`"))
+    """``robust-library``: each gait of :data:`GAITS` trained with today's recipe (the switch-start library,
+    ``GAIT-today.json``) and with the :data:`CHOSEN` one (the shipped library), side by side against the bars; the
+    touches of both judged against the switch-start gait's."""
     paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
-             for gait in GAITS for variant, library in libraries}
+             for gait in GAITS for variant, library in LIBRARIES}
     found = {key: (path, row) for key, path in paths.items() if (row := read_row(path)) is not None}
-    robust = [gait for gait in GAITS if (gait, "`library-robust`") in found]
+    robust = [gait for gait in GAITS if (gait, "robust") in found]
     if not robust:
         return not_yet(*(Path(ablation_dir) / f"{gait}-{CHOSEN}.json" for gait in GAITS))
     lines = [f"| gait | library | shove {SHOVE_UP_TO_NS:g} N s [95%] | worst direction | pushes up to 50 N [95%] "
              "| 0 N [95%] | one step late [95%] | touches at 0 N [95%] | bars met |", "|---|---|" + "---|" * 7]
     verdicts, whole = [], []
     for (gait, library), (_, row) in found.items():
-        shipped = found.get((gait, "shipped"))
-        today = None if shipped is None else shipped[1]["result"]
+        earlier = found.get((gait, "switch-start"))
+        today = None if earlier is None else earlier[1]["result"]
         missed, bars = _judged(row["result"], today)
         lines.append(_library_row(gait, library, row["result"], f"{len(bars) - len(missed)} of {len(bars)}"))
         verdicts.append(f"- {_verdict(f'{gait}, {library}', missed, bars)}")
-        if library != "shipped" and not missed:
+        if library == "robust" and not missed:
             whole.append(gait)
     absent = [path for key, path in paths.items() if key not in found]
     notes = [f"Falls, % of episodes [95% interval], each figure as in the ablation's table above. With the robust "
@@ -292,45 +293,40 @@ def library_table(ablation_dir: Path = ABLATION) -> str:
                       *(f"- {cite(p, e)}" for p, e in found.values())])
 
 
-def _curve(evidence_dir: Path, ablation_dir: Path, gait: str) -> tuple[list[dict], Path, dict] | None:
-    """A gait's single-shove curve: its points, the evidence file and its record; from the gait's ablation row if
-    there is one, else from ``shove-GAIT.json`` (``gaitlib eval GAIT --impulses ... --json``)."""
-    row_path = Path(ablation_dir) / f"{gait}-today.json"
-    row = read_row(row_path)
-    if row is not None:
-        return row["result"]["figures"]["single_shove"], row_path, row
-    path = Path(evidence_dir) / f"shove-{gait}.json"
-    evidence = read_evidence(path)
-    return None if evidence is None else (evidence["result"]["points"], path, evidence)
-
-
-def shove_table(evidence_dir: Path = EVIDENCE, ablation_dir: Path = ABLATION) -> str:
-    """Every gait's falls under one shove of each impulse, with its interval, the worst direction at the bar's
-    impulse and the touches there."""
-    curves = {g: c for g in GAITS if (c := _curve(evidence_dir, ablation_dir, g)) is not None}
-    absent = [Path(evidence_dir) / f"shove-{g}.json" for g in GAITS if g not in curves]
+def shove_table(ablation_dir: Path = ABLATION) -> str:
+    """Every gait's falls under one shove of each impulse in each library of :data:`LIBRARIES`, with its interval,
+    the worst direction at the bar's impulse and the touches there."""
+    paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
+             for gait in GAITS for variant, library in LIBRARIES}
+    curves = {key: (row["result"]["figures"]["single_shove"], path, row)
+              for key, path in paths.items() if (row := read_row(path)) is not None}
+    absent = [path for key, path in paths.items() if key not in curves]
     if not curves:
         return not_yet(*absent)
     impulses = sorted({float(p["impulse_ns"]) for points, _, _ in curves.values() for p in points})
     bar = f"{SHOVE_UP_TO_NS:g} N s"
-    lines = ["| gait | " + " | ".join(f"{i:g} N s [95%]" for i in impulses)
+    lines = ["| gait | library | " + " | ".join(f"{i:g} N s [95%]" for i in impulses)
              + f" | worst direction at {bar} | touches at {bar} [95%] | at most {pct(BARS['single shove'])}% up to "
-             f"{bar}, every direction |", "|---|" + "---|" * (len(impulses) + 3)]
-    verdicts = {gait: _shove_miss({"single_shove": points}) for gait, (points, _, _) in curves.items()}
-    for gait, (points, _, _) in curves.items():
+             f"{bar}, every direction |", "|---|---|" + "---|" * (len(impulses) + 3)]
+    verdicts = {key: _shove_miss({"single_shove": points}) for key, (points, _, _) in curves.items()}
+    for (gait, library), (points, _, _) in curves.items():
         at = {float(p["impulse_ns"]): p for p in points}
         cells = [_shove_rate(at.get(i)) for i in impulses]
         point = at.get(SHOVE_UP_TO_NS)
         worst, touches = _shove_cells(point)[1], _shove_rate(point, "touches")
-        verdict = f"no: {verdicts[gait]}" if verdicts[gait] else "yes"
-        lines.append(f"| {gait} | " + " | ".join(cells) + f" | {worst} | {touches} | {verdict} |")
-    met = [g for g, miss in verdicts.items() if miss is None]
-    sources = "\n".join(f"- {cite(path, record)}" for _, path, record in curves.values())
+        miss = verdicts[gait, library]
+        lines.append(f"| {gait} | {library} | " + " | ".join(cells) + f" | {worst} | {touches} | "
+                     + (f"no: {miss}" if miss else "yes") + " |")
     episodes = sorted({p["episodes"] for points, _, _ in curves.values() for p in points})
-    sizes = ", ".join(f"{e:,}" for e in episodes)
-    notes = [f"One 0.1 s push per episode at a random phase and direction, {sizes} episodes a "
-             f"point, falls by the `trunk` definition. {len(met)} of {len(curves)} gaits meet the bar"
-             + (f" ({', '.join(met)})." if met else ".")]
+    counts = []
+    for _, library in LIBRARIES:
+        measured = [g for g in GAITS if (g, library) in curves]
+        met = [g for g in measured if verdicts[g, library] is None]
+        counts.append(f"{library}: {len(met)} of {len(measured)} gaits meet the bar" + (f" ({', '.join(met)})" if met
+                                                                                        else ""))
+    notes = [f"One 0.1 s push per episode at a random phase and direction, {', '.join(f'{e:,}' for e in episodes)} "
+             f"episodes a point, falls by the `trunk` definition. {'; '.join(counts)}."]
     if absent:
         notes.append(not_yet(*absent))
+    sources = "\n".join(f"- {cite(path, record)}" for _, path, record in curves.values())
     return "\n".join([*lines, "", *notes, "", "Evidence:", "", sources])

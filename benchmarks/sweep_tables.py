@@ -1,8 +1,8 @@
 """The paper's Fig. 4 in docs/results.md: every strategy on every pair under pushes from 0 to 500 N (its top), and
-without pushes on another A1 (its bottom, the real robot there), the shipped library beside the robust one.
-``benchmarks/results_tables.py`` writes them into the doc with the others.
+without pushes on another A1 (its bottom, the real robot there), the library shipped before (switch-start) beside
+the shipped one (robust). ``benchmarks/results_tables.py`` writes them into the doc with the others.
 
-Each block is made from one evidence file in ``docs/results/library/`` and in ``docs/results/robust/`` (like
+Each block is made from one evidence file in ``docs/results/switch-start/`` and in ``docs/results/library/`` (like
 ``bench-0n.json``, one benchmark over every strategy and magnitude): ``sweep`` from ``sweep.json``,
 ``strategies-menagerie`` from ``menagerie-strategies.json`` (MuJoCo Menagerie's A1 at 0 N). Each holds
 
@@ -22,6 +22,7 @@ from pathlib import Path
 
 from evidence import (
     EVIDENCE,
+    SWITCH_START,
     arrow,
     cite,
     groups_at,
@@ -34,7 +35,6 @@ from evidence import (
     settings_line,
     shown,
 )
-from switch_tables import ROBUST
 
 from gaitlib.stats import wilson_interval
 
@@ -93,10 +93,10 @@ def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
     return f"{points:+.1f} points from the best of the paper's other strategies, `{best}`"
 
 
-def sweep_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST, *, name: str = NAME) -> str:
+def sweep_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = EVIDENCE, *, name: str = NAME) -> str:
     """Each strategy over every pair and magnitude of the evidence ``name`` and on the dynamic-to-static pairs, then,
     when it sweeps more than one magnitude, per magnitude, for each library whose evidence is stored."""
-    paths = {"shipped": Path(evidence_dir) / f"{name}.json", "robust": Path(robust_dir) / f"{name}.json"}
+    paths = {"switch-start": Path(switch_start_dir) / f"{name}.json", "robust": Path(evidence_dir) / f"{name}.json"}
     stored = {library: e for library, path in paths.items() if (e := read_evidence(path)) is not None}
     if not stored:
         return not_yet(*paths.values())

@@ -1,16 +1,14 @@
-"""The switching tables of docs/results.md beyond 0 N on the shipped library: the thirty switches under pushes and on
-another A1, and the robust library's switches beside the shipped one's. ``benchmarks/results_tables.py`` writes them
-into the doc with the others.
+"""The switching tables of docs/results.md beyond 0 N: the shipped library's switches beside those of the library
+shipped before it, and where the shipped library's switches fail. ``benchmarks/results_tables.py`` writes them into
+the doc with the others.
 
-- ``pushed-and-heldout``: ``docs/results/library/bench-50n.json`` and ``bench-menagerie-0n.json`` (evidence files
-  like ``bench-0n.json``): ``net-lookahead``'s success per pair with its interval, pooled, and how many pairs
-  reach each setting's goal (:data:`BENCHMARKS`).
-- ``map-robust``: ``docs/results/robust/map-0n.json`` (``gaitlib map``'s ``map.json`` on the robust library's 0 N
+- ``switches``: every pair in both libraries, the switch-start library's evidence (``docs/results/switch-start/``)
+  beside the shipped robust library's (``docs/results/library/``, the same files made with ``--library
+  library-robust``, the folder's name before it shipped), in each setting of :data:`SWITCH_GOALS` the shipped library
+  has stored, against the robust recipe's goal for it.
+- ``map``: ``docs/results/library/map-0n.json`` (``gaitlib map``'s ``map.json`` on the shipped library's 0 N
   collection): each pair's success at a random moment, in its best and worst phase bin of the source and of the
   destination cycle, and its touches.
-- ``robust-switches``: every pair in both libraries, the shipped one's evidence (``docs/results/library/``) beside
-  the robust one's (``docs/results/robust/``, the same files made with ``--library library-robust``), in each
-  setting of :data:`SWITCH_GOALS` the robust library has stored, against the robust recipe's goal for it.
 
 A table whose evidence is not stored yet says "not yet measured", one file missing of several says which.
 """
@@ -22,7 +20,7 @@ from typing import NamedTuple
 
 from evidence import (
     EVIDENCE,
-    ROOT,
+    SWITCH_START,
     arrow,
     cite,
     groups_at,
@@ -37,20 +35,11 @@ from evidence import (
 
 from gaitlib.stats import wilson_interval
 
-__all__ = ["BENCHMARKS", "ROBUST", "STRATEGY", "SWITCH_GOALS", "SwitchGoal", "map_table", "pushed_table",
-           "switches_table"]
-
-ROBUST = ROOT / "docs" / "results" / "robust"
-"""The stored raw results of ``library-robust/``, named as the shipped library's are."""
-STRATEGY = "net-lookahead"
-"""The strategy ``pushed-and-heldout`` tables."""
-BENCHMARKS = (("bench-50n", 50.0, 0.95, "50 N"), ("bench-menagerie-0n", 0.0, 0.97, "Menagerie A1, 0 N"))
-"""The switching benchmarks of ``pushed-and-heldout``: evidence name, push magnitude (N), the goal a pair is
-counted against, the column's name."""
+__all__ = ["SWITCH_GOALS", "SwitchGoal", "map_table", "switches_table"]
 
 
 class SwitchGoal(NamedTuple):
-    """A setting of ``robust-switches`` and the robust recipe's goal in it."""
+    """A setting of ``switches`` and the robust recipe's goal in it."""
 
     name: str
     """The evidence file's name, without ``.json``."""
@@ -67,10 +56,10 @@ SWITCH_GOALS = (SwitchGoal("bench-0n", "random", 0.0, 0.97, "random, 0 N"),
                 SwitchGoal("bench-0n", "net-lookahead", 0.0, 0.995, "net-lookahead, 0 N"),
                 SwitchGoal("bench-50n", "net-lookahead", 50.0, 0.95, "net-lookahead, 50 N"),
                 SwitchGoal("bench-menagerie-0n", "net-lookahead", 0.0, 0.97, "net-lookahead, Menagerie A1, 0 N"))
-"""The settings of ``robust-switches``, in the table's order."""
+"""The settings of ``switches``, in the table's order."""
 
 
-def _cells(name: str, evidence: dict, magnitude: float, strategy: str = STRATEGY) -> dict[str, dict]:
+def _cells(name: str, evidence: dict, magnitude: float, strategy: str) -> dict[str, dict]:
     groups = groups_at(evidence["result"], magnitude)
     if strategy not in groups:
         raise ValueError(f"{name}.json holds no {strategy} group at {magnitude:g} N")
@@ -86,52 +75,14 @@ def _rate(cell: dict | None, goal: float) -> str:
     return f"{f'**{rate}**' if successes >= goal * samples else rate} {interval(*wilson_interval(successes, samples))}"
 
 
-def _success(cell: dict | None, goal: float) -> str:
-    if cell is None:
-        return "- | -"
-    return f"{_rate(cell, goal)} | {pct(cell['touched'] / cell['samples'])}%"
-
-
 def _reached(cells: dict[str, dict], goal: float) -> int:
     return sum(c["successes"] >= goal * c["samples"] for c in cells.values())
 
 
-def pushed_table(evidence_dir: Path = EVIDENCE) -> str:
-    """``pushed-and-heldout``: ``net-lookahead`` on every pair at 50 N and on MuJoCo Menagerie's A1 at 0 N, each
-    against its goal."""
-    paths = {name: Path(evidence_dir) / f"{name}.json" for name, *_ in BENCHMARKS}
-    stored = {name: read_evidence(p) for name, p in paths.items()}
-    if all(e is None for e in stored.values()):
-        return not_yet(*paths.values())
-    found = [(stored[name], _cells(name, stored[name], magnitude), goal, title)
-             for name, magnitude, goal, title in BENCHMARKS if stored[name] is not None]
-    pairs = sorted({p for _, cells, _, _ in found for p in cells}, key=lambda p: p.split("-"))
-    lines = ["| pair | " + " | ".join(f"{title} [95%] | {title} touches" for *_, title in found) + " |",
-             "|---|" + "---|---|" * len(found)]
-    lines += [f"| {arrow(p)} | " + " | ".join(_success(cells.get(p), goal) for _, cells, goal, _ in found) + " |"
-              for p in pairs]
-    pooled_counts = [pooled(cells.values()) for _, cells, _, _ in found]
-    lines.append("| all pairs | " + " | ".join(f"{pct(s / n)} {interval(*wilson_interval(s, n))} | {pct(t / n)}%"
-                                                for s, n, t in pooled_counts) + " |")
-    reached = [_reached(cells, goal) for _, cells, goal, _ in found]
-    lines.append("| pairs at the goal or more | " + " | ".join(
-        f"{k} of {len(cells)} (goal {pct(goal)}%) | " for k, (_, cells, goal, _) in zip(reached, found, strict=True))
-                 + " |")
-    notes = []
-    for k, (evidence, cells, goal, title) in zip(reached, found, strict=True):
-        notes.append(f"{title}: {k} of {len(cells)} pairs reach {pct(goal)}%; `{STRATEGY}`, "
-                     f"{settings_line(evidence['result']['settings'])}.")
-    absent = [paths[name] for name, e in stored.items() if e is None]
-    if absent:
-        notes.append(not_yet(*absent))
-    sources = [f"- {cite(paths[name], e)}" for name, e in stored.items() if e is not None]
-    return "\n".join([*lines, "", " ".join(notes), "", "Evidence:", "", *sources])
-
-
-def switches_table(evidence_dir: Path = EVIDENCE, robust_dir: Path = ROBUST) -> str:
-    """``robust-switches``: each pair's success in the shipped and the robust library, setting by setting of
-    :data:`SWITCH_GOALS`, with the pooled rate, its touches, and the pairs at the goal in each."""
-    folders = {"shipped": Path(evidence_dir), "robust": Path(robust_dir)}
+def switches_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = EVIDENCE) -> str:
+    """``switches``: each pair's success in the switch-start library and in the shipped robust one, setting by setting
+    of :data:`SWITCH_GOALS`, with the pooled rate, its touches, and the pairs at the goal in each."""
+    folders = {"switch-start": Path(switch_start_dir), "robust": Path(evidence_dir)}
     names = dict.fromkeys(goal.name for goal in SWITCH_GOALS)
     paths = {(library, name): folder / f"{name}.json" for library, folder in folders.items() for name in names}
     stored = {key: read_evidence(path) for key, path in paths.items()}
@@ -178,9 +129,9 @@ def _bin(rate: dict) -> str:
     return f"{pct(_share(rate))} {interval(*rate['ci95'])} of {rate['samples']:,}"
 
 
-def map_table(robust_dir: Path = ROBUST) -> str:
-    """``map-robust``: where the robust library's switches fail, pair by pair, from its stored transition map."""
-    path = Path(robust_dir) / "map-0n.json"
+def map_table(evidence_dir: Path = EVIDENCE) -> str:
+    """``map``: where the shipped library's switches fail, pair by pair, from its stored transition map."""
+    path = Path(evidence_dir) / "map-0n.json"
     evidence = read_evidence(path)
     if evidence is None:
         return not_yet(path)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib
 import itertools
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -116,7 +117,9 @@ def test_a_figure_changed_by_hand_is_caught(tmp_path: Path) -> None:
     text = copy.read_text()
     start = text.index("<!-- table: quality-bar -->")
     row = text.index("| pace |", start)
-    edited = text[:row] + text[row:].replace("16.8 deg", "14.8 deg", 1)
+    heading = re.search(r"(\d+)\.(\d) deg", text[row:])
+    assert heading is not None
+    edited = text[:row] + text[row:].replace(heading.group(0), f"{int(heading.group(1)) + 1}.{heading.group(2)} deg", 1)
     assert edited != text
     copy.write_text(edited)
     assert tables.check_doc(copy) == "quality-bar"
@@ -134,9 +137,9 @@ def _flat(text: str) -> str:
 
 def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     accuracy = _accuracy(tmp_path / "accuracy.json")
-    (tmp_path / "robust-lib" / "switching").mkdir(parents=True)
-    robust = _accuracy(tmp_path / "robust-lib" / "switching" / "accuracy.json", latent=0.8, explicit=0.85)
-    made = tables.render_tables(evidence, accuracy, robust)
+    (tmp_path / "earlier-lib" / "switching").mkdir(parents=True)
+    earlier = _accuracy(tmp_path / "earlier-lib" / "switching" / "accuracy.json", latent=0.8, explicit=0.85)
+    made = tables.render_tables(evidence, accuracy, earlier)
     assert list(made) == list(tables.TABLES)
     assert all(len(line) <= tables.WIDTH for body in made.values() for line in body.splitlines()
                if not line.startswith("|") and "`gaitlib" not in line)
@@ -152,14 +155,14 @@ def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     assert "seed 0; falls by the `trunk` definition" in pairs
     routes = made["routes"]
     assert "| trot → pace | stand | 92.0 | 98.8 | 93.0 [" in routes  # predicted: 0.998 x 0.990
-    assert "| at 99.0% or more | | | | 0 of 2 | 1 of 2 |" in routes
+    assert "| at 99.5% or more | | | | 0 of 2 | 0 of 2 |" in routes  # the shipped library's goal, the robust recipe's
     net = made["net-accuracy"]
     assert "| latent, paper | 89.2 | 89.2 |" in net  # the paper's 0.8915, rounded as written
     assert "latent >= explicit holds (75.0 against 74.0)" in net and "--ablation --falls trunk" in net
-    robust_net = made["net-accuracy-robust"]  # another library's net: its fit names the library
-    assert "latent >= explicit does not hold (80.0 against 85.0)" in robust_net
-    assert f"`gaitlib fit --library {tmp_path / 'robust-lib'} --data data/a.h5 --data data/b.h5 --ablation" \
-        in robust_net
+    earlier_net = made["net-accuracy-switch-start"]  # another library's net: its fit names the library
+    assert "latent >= explicit does not hold (80.0 against 85.0)" in earlier_net
+    assert f"`gaitlib fit --library {tmp_path / 'earlier-lib'} --data data/a.h5 --data data/b.h5 --ablation" \
+        in earlier_net
 
 
 def test_missing_evidence_says_not_yet_measured(tmp_path: Path, evidence: Path) -> None:
@@ -167,7 +170,7 @@ def test_missing_evidence_says_not_yet_measured(tmp_path: Path, evidence: Path) 
         (evidence / f"{name}.json").unlink()
     made = tables.render_tables(evidence, tmp_path / "no-accuracy.json", tmp_path / "none" / "accuracy.json")
     assert made["pairs-0n"].startswith("Not yet measured:") and "bench-0n.json" in made["pairs-0n"]
-    assert made["net-accuracy-robust"].startswith("Not yet measured:")
+    assert made["net-accuracy-switch-start"].startswith("Not yet measured:")
     assert made["routes"].startswith("Not yet measured:") and "bench-routed.json" in made["routes"]
     assert "bench-direct" not in made["routes"] and made["net-accuracy"].startswith("Not yet measured:")
     assert "| pace |" in made["quality-bar"]
@@ -324,57 +327,25 @@ def _interval(count: int, total: int) -> str:
     return f"[{tables.pct(low)}, {tables.pct(high)}]"
 
 
-def test_the_pairs_pushed_and_on_another_a1_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
-    made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"]
-    assert made.startswith("Not yet measured:") and "bench-50n.json" in made and "bench-menagerie-0n.json" in made
-    # at 50 N the five pairs into the stand reach 95% (390 of 400), the others 92.5%; random is not tabled
-    pushed = _benchmark({"net-lookahead": {p: _cell(390 if p.endswith("stand") else 370, 400) for p in _pairs()},
-                         "random": {p: _cell(100, 400) for p in _pairs()}}, magnitude=50.0, samples=400)
-    _store(evidence, "bench-50n", pushed, "gaitlib benchmark --strategies net-lookahead --magnitudes 50")
-    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"])
-    assert f"| trot → stand | **97.5** {_interval(390, 400)} | 3.0% |" in made
-    assert f"| trot → walk | 92.5 {_interval(370, 400)} | 3.0% |" in made and "| 25.0" not in made
-    assert f"| all pairs | 93.3 {_interval(11200, 12000)} | 3.0% |" in made
-    assert "| pairs at the goal or more | 5 of 30 (goal 95.0%) | |" in made
-    assert "50 N: 5 of 30 pairs reach 95.0%; `net-lookahead`, 400 transitions a cell, seed 0" in made
-    assert "Not yet measured: `" in made and "bench-menagerie-0n.json` not stored yet." in made
-    # on Menagerie's A1 every pair reaches 97% (195 of 200) but the five from the trot (90%)
-    robot = "/x/mujoco_menagerie/unitree_a1/scene.xml"
-    held = _benchmark({"net-lookahead": {p: _cell(180 if p.startswith("trot") else 195, 200) for p in _pairs()}},
-                      samples=200, robot=robot)
-    _store(evidence, "bench-menagerie-0n", held, f"gaitlib benchmark --robot {robot} --magnitudes 0 --samples 200")
-    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["pushed-and-heldout"]
-    assert _prose_fits(body) and "Not yet measured" not in body
-    made = _flat(body)
-    assert "| pair | 50 N [95%] | 50 N touches | Menagerie A1, 0 N [95%] | Menagerie A1, 0 N touches |" in made
-    assert f"| trot → pace | 92.5 {_interval(370, 400)} | 3.0% | 90.0 {_interval(180, 200)} | 6.0% |" in made
-    assert "| 5 of 30 (goal 95.0%) | | 25 of 30 (goal 97.0%) | |" in made
-    assert f"Menagerie A1, 0 N: 25 of 30 pairs reach 97.0%; `net-lookahead`, 200 transitions a cell, seed 0; falls " \
-           f"by the `trunk` definition, robot `{robot}`." in made
-    assert made.count("(made 2026-12-03)") == 2
-    _store(evidence, "bench-menagerie-0n", _benchmark({"net-lookahead": held["groups"]["net-lookahead@0"]["cells"]},
-                                                      magnitude=50.0, samples=200))
-    with pytest.raises(ValueError, match=r"bench-menagerie-0n\.json holds no net-lookahead group at 0 N"):
-        switching.pushed_table(evidence)
-
-
-def test_the_robust_library_switches_beside_the_shipped_ones_from_small_evidence(tmp_path: Path,
-                                                                                  evidence: Path) -> None:
-    robust = tmp_path / "robust"  # beside the evidence folder, as docs/results/robust is beside library/
-    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"])
-    assert made.startswith("Not yet measured:") and "robust/bench-0n.json" in made and "robust/bench-50n.json" in made
-    robust.mkdir()
-    # the robust library: random 98% on every pair but trot -> walk (96%), net-lookahead 99.6% but trot -> pace (99%)
-    _store(robust, "bench-0n", _benchmark({
+def test_the_shipped_librarys_switches_beside_the_switch_start_ones_from_small_evidence(tmp_path: Path,
+                                                                                        evidence: Path) -> None:
+    earlier = tmp_path / "switch-start"  # beside the evidence folder, as docs/results/switch-start is beside library/
+    earlier.mkdir()
+    shutil.move(evidence / "bench-0n.json", earlier / "bench-0n.json")  # the fixture's 0 N: the earlier library's
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["switches"])
+    assert made.startswith("Not yet measured:")
+    assert "evidence/bench-0n.json" in made and "evidence/bench-50n.json" in made
+    # the shipped library: random 98% on every pair but trot -> walk (96%), net-lookahead 99.6% but trot -> pace (99%)
+    _store(evidence, "bench-0n", _benchmark({
         "net-lookahead": {p: _cell(990 if p == "trot-pace" else 996) for p in _pairs()},
         "random": {p: _cell(960 if p == "trot-walk" else 980) for p in _pairs()},
     }), "gaitlib benchmark --library library-robust --strategies random,net-lookahead --magnitudes 0")
-    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"]
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["switches"]
     assert _prose_fits(body)
     made = _flat(body)
-    assert ("| pair | random, 0 N: shipped [95%] | random, 0 N: robust [95%] | net-lookahead, 0 N: shipped [95%] "
-            "| net-lookahead, 0 N: robust [95%] |") in made and "50 N:" not in made.split("Not yet")[0]
-    # the goals: random 97%, net-lookahead 99.5% (the shipped 99.5% into the walk meets it; the robust 99.0% not)
+    assert ("| pair | random, 0 N: switch-start [95%] | random, 0 N: robust [95%] | net-lookahead, 0 N: switch-start "
+            "[95%] | net-lookahead, 0 N: robust [95%] |") in made and "50 N:" not in made.split("Not yet")[0]
+    # the goals: random 97%, net-lookahead 99.5% (the switch-start 99.5% into the walk meets it; the robust 99.0% not)
     assert (f"| trot → walk | 90.0 {_interval(900, 1000)} | 96.0 {_interval(960, 1000)} "
             f"| **99.5** {_interval(995, 1000)} | **99.6** {_interval(996, 1000)} |") in made
     assert f"| trot → pace | 90.0 {_interval(900, 1000)} | **98.0** {_interval(980, 1000)} | 97.0 " in made
@@ -382,49 +353,52 @@ def test_the_robust_library_switches_beside_the_shipped_ones_from_small_evidence
     assert "| pairs at the goal or more | 0 of 30 | 29 of 30 | 10 of 30 | 29 of 30 |" in made
     assert f"| all pairs (touches) | 90.0 {_interval(27000, 30000)} (1.2%) | 97.9 {_interval(29380, 30000)} (1.2%) |" \
         in made
-    assert ("random, 0 N (goal 97.0% on every pair): shipped 0 of 30, robust 29 of 30; each library: 1,000 "
+    assert ("random, 0 N (goal 97.0% on every pair): switch-start 0 of 30, robust 29 of 30; each library: 1,000 "
             "transitions a cell, seed 0; falls by the `trunk` definition.") in made
-    assert "net-lookahead, 0 N (goal 99.5% on every pair): shipped 10 of 30, robust 29 of 30;" in made
-    assert "Not yet measured: `" in made and "robust/bench-50n.json`, `" in made and "bench-0n.json`, `" not in made
+    assert "net-lookahead, 0 N (goal 99.5% on every pair): switch-start 10 of 30, robust 29 of 30;" in made
+    assert "Not yet measured: `" in made and "evidence/bench-50n.json`, `" in made
+    assert "switch-start/bench-50n" not in made
     assert made.count("(made 2026-12-03)") == 2 and "--library library-robust" in made
-    # at 50 N only the robust library is stored: the shipped column is "-" throughout
-    _store(robust, "bench-50n", _benchmark({"net-lookahead": {p: _cell(390, 400) for p in _pairs()}},
-                                           magnitude=50.0, samples=400))
-    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-switches"])
+    # at 50 N only the shipped library is stored: the switch-start column is "-" throughout
+    _store(evidence, "bench-50n", _benchmark({"net-lookahead": {p: _cell(390, 400) for p in _pairs()}},
+                                             magnitude=50.0, samples=400))
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["switches"])
     assert f"| - | **97.5** {_interval(390, 400)} |" in made and "| 29 of 30 | - | 30 of 30 |" in made
     assert "net-lookahead, 50 N (goal 95.0% on every pair): robust 30 of 30; robust: 400 transitions" in made
-    _store(robust, "bench-50n", _benchmark({"random": {p: _cell(390, 400) for p in _pairs()}}, magnitude=50.0))
+    _store(evidence, "bench-50n", _benchmark({"random": {p: _cell(390, 400) for p in _pairs()}}, magnitude=50.0))
     with pytest.raises(ValueError, match=r"bench-50n\.json holds no net-lookahead group at 50 N"):
-        switching.switches_table(evidence, robust)
+        switching.switches_table(earlier, evidence)
 
 
-def test_every_gaits_single_shove_curve_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
-    """The curves table takes a gait's curve from its ablation row when there is one, else from its stored
-    ``gaitlib eval --impulses`` result, and reads the verdict against the bar from the worst direction."""
+def test_every_gaits_single_shove_curve_in_both_libraries_from_small_rows(tmp_path: Path, evidence: Path) -> None:
+    """The curves table takes each library's curve of a gait from its ablation row (today's recipe: the switch-start
+    library; the chosen one: the shipped library), names the rows not stored, and reads the verdict against the bar
+    from the worst direction."""
     folder = tmp_path / "ablation"
     folder.mkdir()
+    assert _flat(robustness.shove_table(folder)).startswith("Not yet measured:")
     quiet = dict.fromkeys(("front", "left", "back", "right"), 0)
-    pace = _ablation("pace", ("trot", "stand"), shove={"front": 0, "left": 4, "back": 0, "right": 0}, push=10,
-                     zero=1, late=30, minutes=83.3)
-    (folder / "pace-today.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
-                                                        "result": pace}))
-    walk = {"gait": "walk", "points": [_shove(0.0, quiet), _shove(12.0, dict.fromkeys(quiet, 1))]}
-    command = "gaitlib eval walk --impulses 0,12 --episodes 1024 --json"
-    (evidence / "shove-walk.json").write_text(json.dumps({"command": command, "made": "2026-12-05", "result": walk}))
-    body = robustness.shove_table(evidence, folder)
+    rows = {"pace-today": {"front": 0, "left": 4, "back": 0, "right": 0}, f"pace-{robustness.CHOSEN}": quiet,
+            f"walk-{robustness.CHOSEN}": {**quiet, "right": 1}}
+    for name, shove in rows.items():
+        row = _ablation(name.split("-")[0], ("trot", "stand"), shove=shove, push=0, zero=0, late=0, minutes=50.0)
+        (folder / f"{name}.json").write_text(json.dumps({"command": f"robust_ablation {name}", "result": row}))
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["shove-curves"]
+    assert _prose_fits(body)
     made = _flat(body)
-    assert made.index("| pace |") < made.index("| walk |")  # the library's order
-    assert f"| walk | 0.0 {_interval(0, 1024)} | - | 0.4 {_interval(4, 1024)} | - | front 1/256 |" in made
-    assert "| yes |" in made and "| no: 1.6% in the left direction (4 of 256) at 12 N s |" in made
-    assert "1 of 2 gaits meet the bar (walk)." in made
-    assert f"`{evidence / 'shove-walk.json'}` (made 2026-12-05): `{command}`" in made
-    for gait in ("trot", "stand", "bound", "pronk"):
-        assert f"`{evidence / f'shove-{gait}.json'}`" in made  # not yet measured, named
+    assert made.index("| pace | switch-start |") < made.index("| pace | robust |") < made.index("| walk | robust |")
+    assert f"| pace | switch-start | 0.0 {_interval(0, 1024)} | 0.0 {_interval(0, 1024)} | 0.4 {_interval(4, 1024)} " \
+           f"| 2.0 {_interval(20, 1024)} | left 4/256 |" in made
+    assert "| no: 1.6% in the left direction (4 of 256) at 12 N s |" in made
+    assert f"| walk | robust | 0.0 {_interval(0, 1024)} | 0.0 {_interval(0, 1024)} | 0.1 {_interval(1, 1024)} " in made
+    assert "switch-start: 0 of 1 gaits meet the bar; robust: 2 of 2 gaits meet the bar (pace, walk)." in made
+    assert "(made 2026-12-04): `robust_ablation pace-today`" in made
+    assert f"`{folder / 'walk-today.json'}`" in made and f"`{folder / f'trot-{robustness.CHOSEN}.json'}`" in made
 
 
-def test_the_robust_library_beside_the_shipped_one_from_small_rows(tmp_path: Path, evidence: Path) -> None:
-    """Each gait's shipped row beside its row with the chosen recipe, every bar counted, the touches of both judged
-    against the shipped gait's; a gait without its chosen row is named, not judged."""
+def test_the_shipped_library_beside_the_switch_start_one_from_small_rows(tmp_path: Path, evidence: Path) -> None:
+    """Each gait's switch-start row beside its row with the chosen recipe (the shipped library), every bar counted,
+    the touches of both judged against the switch-start gait's; a gait without its chosen row is named, not judged."""
     folder = tmp_path / "ablation"
     folder.mkdir()
     made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-library"]
@@ -433,19 +407,19 @@ def test_the_robust_library_beside_the_shipped_one_from_small_rows(tmp_path: Pat
     rows = {"today": _ablation("stand", ("pace", "trot"), shove={**quiet, "left": 4}, push=30, zero=0, late=2,
                                minutes=11.7),
             robustness.CHOSEN: _ablation("stand", ("pace", "trot"), shove=quiet, push=0, zero=0, late=0, minutes=9.4)}
-    rows[robustness.CHOSEN]["figures"]["zero_n"] = _run(0, touches=60)  # past the shipped 3 of 1,024
+    rows[robustness.CHOSEN]["figures"]["zero_n"] = _run(0, touches=60)  # past the switch-start 3 of 1,024
     for variant, row in rows.items():
         (folder / f"stand-{variant}.json").write_text(json.dumps({"command": f"robust_ablation {variant}",
                                                                    "result": row}))
     body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["robust-library"]
     assert _prose_fits(body)
     made = _flat(body)
-    assert made.index("| stand | shipped |") < made.index("| stand | `library-robust` |")
-    assert f"| stand | shipped | 0.4 {_interval(4, 1024)} | left 4/256 | 2.9 {_interval(30, 1024)} | 0.0 " \
+    assert made.index("| stand | switch-start |") < made.index("| stand | robust |")
+    assert f"| stand | switch-start | 0.4 {_interval(4, 1024)} | left 4/256 | 2.9 {_interval(30, 1024)} | 0.0 " \
            f"{_interval(0, 1024)} | 0.2 {_interval(2, 1024)} | 0.3 {_interval(3, 1024)} | 5 of 7 |" in made
-    assert f"| stand | `library-robust` | 0.0 {_interval(0, 1024)} | none |" in made
+    assert f"| stand | robust | 0.0 {_interval(0, 1024)} | none |" in made
     assert f"| 5.9 {_interval(60, 1024)} | 6 of 7 |" in made
-    assert "stand, `library-robust`: meets 6 of the 7 bars (single shove, pushes up to 50 N, 0 N, one step late, " \
+    assert "stand, robust: meets 6 of the 7 bars (single shove, pushes up to 50 N, 0 N, one step late, " \
            f"speed within 10%, heading within 15 deg); misses touches at 0 N: 5.9% {_interval(60, 1024)} against " \
            f"today's 0.3% {_interval(3, 1024)}." in made
     assert "With the robust recipe 0 of the 1 gaits measured meet every bar." in made
@@ -473,38 +447,38 @@ def _sweep(successes: dict[str, dict[float, int]], *, static: dict[str, dict[flo
 
 
 def test_the_papers_sweep_for_both_libraries_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
-    robust = tmp_path / "robust"
-    robust.mkdir()
+    earlier = tmp_path / "switch-start"
+    earlier.mkdir()
     made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"])
-    assert made.startswith("Not yet measured:") and "evidence/sweep.json" in made and "robust/sweep.json" in made
-    # the shipped library: net 45 of 50 at 0 N and 25 at 500 N, but 50 and 40 on the two pairs into the stand
-    shipped = _sweep({"random": {0.0: 40, 500.0: 20}, "tmt": {0.0: 42, 500.0: 22}, "net": {0.0: 45, 500.0: 25}},
+    assert made.startswith("Not yet measured:") and "evidence/sweep.json" in made and "switch-start/sweep.json" in made
+    # the switch-start library: net 45 of 50 at 0 N and 25 at 500 N, but 50 and 40 on the two pairs into the stand
+    earlier_sweep = _sweep({"random": {0.0: 40, 500.0: 20}, "tmt": {0.0: 42, 500.0: 22}, "net": {0.0: 45, 500.0: 25}},
                      static={"net": {0.0: 50, 500.0: 40}})
-    _store(evidence, "sweep", shipped, "gaitlib benchmark --magnitudes 0:500:500 --samples 50")
+    _store(earlier, "sweep", earlier_sweep, "gaitlib benchmark --magnitudes 0:500:500 --samples 50")
     body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"]
     assert _prose_fits(body)
     made = _flat(body)
-    assert ("| strategy | shipped: all pairs, 0-500 N [95%] (touches) | shipped: pace → stand, trot → stand [95%] "
-            "(touches) |") in made
+    assert ("| strategy | switch-start: all pairs, 0-500 N [95%] (touches) | switch-start: pace → stand, trot → stand "
+            "[95%] (touches) |") in made
     assert f"| `random` | 60.0 {_interval(1800, 3000)} (24.0%) | 60.0 {_interval(120, 200)} (24.0%) |" in made
     assert f"| `net` | 71.3 {_interval(2140, 3000)} (24.0%) | 90.0 {_interval(180, 200)} (24.0%) |" in made
-    assert ("Shipped: ranked by success over 0-500 N: `net`, `tmt`, `random`; on pace → stand, trot → stand, `net` "
-            "is +26.0 points from the best of the paper's other strategies, `tmt`.") in made
+    assert ("Switch-start: ranked by success over 0-500 N: `net`, `tmt`, `random`; on pace → stand, trot → stand, "
+            "`net` is +26.0 points from the best of the paper's other strategies, `tmt`.") in made
     assert f"| push, N | `random` | `tmt` | `net` | |---|---|---|---| | 0 | 80.0 {_interval(1200, 1500)} |" \
         in made
     assert f"| 500 | 40.0 {_interval(600, 1500)} | 44.0 {_interval(660, 1500)} | 52.0 {_interval(780, 1500)} |" in made
-    assert "robust/sweep.json` not stored yet." in made and "shipped: 50 transitions a cell, seed 0" in made
-    # the robust library sweeps two strategies only: the shipped ones it lacks are "-"
-    _store(robust, "sweep", _sweep({"random": {0.0: 45, 500.0: 45}, "net-lookahead": {0.0: 50, 500.0: 50}}))
+    assert "evidence/sweep.json` not stored yet." in made and "switch-start: 50 transitions a cell, seed 0" in made
+    # the shipped robust library sweeps two strategies only: the switch-start ones it lacks are "-"
+    _store(evidence, "sweep", _sweep({"random": {0.0: 45, 500.0: 45}, "net-lookahead": {0.0: 50, 500.0: 50}}))
     made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["sweep"])
     assert f"| `tmt` | 64.0 {_interval(1920, 3000)} (24.0%) | - | 64.0 {_interval(128, 200)} (24.0%) | - |" in made
     assert f"| `net-lookahead` | - | 100.0 {_interval(3000, 3000)} (24.0%) | - |" in made
     assert "Robust: ranked by success over 0-500 N: `net-lookahead`, `random`." in made and "not stored" not in made
     assert "in parentheses; each library: 50 transitions a cell, seed 0; falls by the `trunk` definition." in made
     assert made.count("(made 2026-12-03)") == 2
-    del shipped["groups"]["tmt@500"]
-    _store(evidence, "sweep", shipped)
-    with pytest.raises(ValueError, match=r"evidence/sweep\.json does not sweep every strategy over the same push"):
+    del earlier_sweep["groups"]["tmt@500"]
+    _store(earlier, "sweep", earlier_sweep)
+    with pytest.raises(ValueError, match=r"switch-start/sweep\.json does not sweep every strategy over the same push"):
         tables.render_tables(evidence, tmp_path / "no-accuracy.json")
 
 
@@ -513,11 +487,9 @@ def _rates(successes: list[int], samples: int = 100) -> list[dict]:
             for k in successes]
 
 
-def test_where_the_robust_librarys_switches_fail_from_a_small_map(tmp_path: Path, evidence: Path) -> None:
-    robust = tmp_path / "robust"
-    robust.mkdir()
-    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map-robust"])
-    assert made == f"Not yet measured: `{robust / 'map-0n.json'}` not stored yet."
+def test_where_the_shipped_librarys_switches_fail_from_a_small_map(tmp_path: Path, evidence: Path) -> None:
+    made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map"])
+    assert made == f"Not yet measured: `{evidence / 'map-0n.json'}` not stored yet."
     # two pairs, four phase bins each: trot -> walk worst at its source's second bin (60 of 100), best at its
     # destination's last (99 of 100); an empty bin is never the best or the worst
     pairs = []
@@ -529,9 +501,9 @@ def test_where_the_robust_librarys_switches_fail_from_a_small_map(tmp_path: Path
                                                             "ci95": [0.0, 1.0]}],
                       "by_dest_phase": _rates(dest), "by_contacts": {}, "fall_after_s": falls,
                       "touches": _rates([20], 400)[0]})
-    _store(robust, "map-0n", {"source": "data/robust-0n.h5", "falls": "trunk", "fall_after_s_q99": 1.23,
+    _store(evidence, "map-0n", {"source": "data/robust-0n.h5", "falls": "trunk", "fall_after_s_q99": 1.23,
                               "pairs": pairs}, "gaitlib map data/robust-0n.h5 --out runs/robust-map-0n")
-    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map-robust"]
+    body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["map"]
     assert _prose_fits(body)
     made = _flat(body)
     assert made.index("| stand → pace |") < made.index("| trot → walk |")
@@ -543,29 +515,27 @@ def test_where_the_robust_librarys_switches_fail_from_a_small_map(tmp_path: Path
     assert "(made 2026-12-03): `gaitlib map data/robust-0n.h5 --out runs/robust-map-0n`" in made
 
 
-def test_the_robust_librarys_routes_are_counted_against_its_own_goal(tmp_path: Path, evidence: Path) -> None:
-    robust = tmp_path / "robust"
-    robust.mkdir()
+def test_each_librarys_routes_are_counted_against_its_own_goal(tmp_path: Path, evidence: Path) -> None:
+    earlier = tmp_path / "switch-start"
+    earlier.mkdir()
     for name in ("routes", "bench-direct", "bench-routed"):
-        shutil.copy(evidence / f"{name}.json", robust / f"{name}.json")
+        shutil.copy(evidence / f"{name}.json", earlier / f"{name}.json")
     made = tables.render_tables(evidence, tmp_path / "no-accuracy.json")
-    # trot -> pace routed: 99.1%, the shipped goal (99%) met, the robust one (99.5%) not
-    assert f"| **99.1** {_interval(991, 1000)} |" in made["routes"] and "| at 99.0% or more | | | | 0 of 2 | 1 of 2 |" \
-        in made["routes"]
-    assert f"| 99.1 {_interval(991, 1000)} |" in made["routes-robust"]
-    assert "| at 99.5% or more | | | | 0 of 2 | 0 of 2 |" in made["routes-robust"]
-    assert "Routed, 0 of 2 pairs reach 99.5%; directly, 0." in _flat(made["routes-robust"])
+    # trot -> pace routed: 99.1%, the switch-start library's goal (99%) met, the shipped one's (99.5%) not
+    assert f"| **99.1** {_interval(991, 1000)} |" in made["routes-switch-start"]
+    assert "| at 99.0% or more | | | | 0 of 2 | 1 of 2 |" in made["routes-switch-start"]
+    assert f"| 99.1 {_interval(991, 1000)} |" in made["routes"]
+    assert "| at 99.5% or more | | | | 0 of 2 | 0 of 2 |" in made["routes"]
+    assert "Routed, 0 of 2 pairs reach 99.5%; directly, 0." in _flat(made["routes"])
 
 
 def test_every_strategy_on_another_a1_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
-    robust = tmp_path / "robust"
-    robust.mkdir()
     made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["strategies-menagerie"])
     assert made.startswith("Not yet measured:") and "evidence/menagerie-strategies.json" in made
     robot = "MENAGERIE/unitree_a1/scene_nomesh.xml"
     held = _sweep({"random": {0.0: 45}, "net": {0.0: 48}})
     held["settings"]["robot"] = robot
-    _store(robust, "menagerie-strategies", held, f"gaitlib benchmark --robot {robot} --magnitudes 0 --samples 50")
+    _store(evidence, "menagerie-strategies", held, f"gaitlib benchmark --robot {robot} --magnitudes 0 --samples 50")
     body = tables.render_tables(evidence, tmp_path / "no-accuracy.json")["strategies-menagerie"]
     assert _prose_fits(body)
     made = _flat(body)
@@ -575,11 +545,11 @@ def test_every_strategy_on_another_a1_from_small_evidence(tmp_path: Path, eviden
     assert f"robust: 50 transitions a cell, seed 0; falls by the `trunk` definition, robot `{robot}`." in made
     assert "Robust: ranked by success at 0 N: `net`, `random`; on pace → stand, trot → stand, `net` is +6.0 " \
            "points from the best of the paper's other strategies, `random`." in made
-    assert "| push, N |" not in made and "evidence/menagerie-strategies.json` not stored yet." in made
+    assert "| push, N |" not in made and "switch-start/menagerie-strategies.json` not stored yet." in made
     # a sweep of other pairs only: no margin on the dynamic-to-static pairs, their columns "-"
     for group in held["groups"].values():
         for pair in ("pace-stand", "trot-stand"):
             del group["cells"][pair]
-    _store(robust, "menagerie-strategies", held)
+    _store(evidence, "menagerie-strategies", held)
     made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["strategies-menagerie"])
     assert f"| `net` | 96.0 {_interval(1344, 1400)} (24.0%) | - |" in made and "`net` is" not in made
