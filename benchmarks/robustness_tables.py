@@ -322,10 +322,9 @@ def shove_table(ablation_dir: Path = ABLATION) -> str:
     for _, library in LIBRARIES:
         measured = [g for g in GAITS if (g, library) in curves]
         met = [g for g in measured if verdicts[g, library] is None]
-        counts.append(f"{library}: {len(met)} of {len(measured)} gaits meet the bar" + (f" ({', '.join(met)})" if met
-                                                                                        else ""))
+        counts.append(f"{library} {len(met)} of {len(measured)}" + (f" ({', '.join(met)})" if met else ""))
     notes = [f"One 0.1 s push per episode at a random phase and direction, {', '.join(f'{e:,}' for e in episodes)} "
-             f"episodes a point, falls by the `trunk` definition. {'; '.join(counts)}."]
+             f"episodes a point, falls by the `trunk` definition. Gaits meeting the bar: {'; '.join(counts)}."]
     if absent:
         notes.append(not_yet(*absent))
     sources = "\n".join(f"- {cite(path, record)}" for _, path, record in curves.values())

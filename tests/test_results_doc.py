@@ -391,7 +391,7 @@ def test_every_gaits_single_shove_curve_in_both_libraries_from_small_rows(tmp_pa
            f"| 2.0 {_interval(20, 1024)} | left 4/256 |" in made
     assert "| no: 1.6% in the left direction (4 of 256) at 12 N s |" in made
     assert f"| walk | robust | 0.0 {_interval(0, 1024)} | 0.0 {_interval(0, 1024)} | 0.1 {_interval(1, 1024)} " in made
-    assert "switch-start: 0 of 1 gaits meet the bar; robust: 2 of 2 gaits meet the bar (pace, walk)." in made
+    assert "Gaits meeting the bar: switch-start 0 of 1; robust 2 of 2 (pace, walk)." in made
     assert "(made 2026-12-04): `robust_ablation pace-today`" in made
     assert f"`{folder / 'walk-today.json'}`" in made and f"`{folder / f'trot-{robustness.CHOSEN}.json'}`" in made
 
