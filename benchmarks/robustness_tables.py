@@ -34,7 +34,7 @@ from evidence import (
         speed_heading_misses,
 )
 
-from gaitlib.training.recipe import Recipe
+from gaitlib.training.recipe import PAPER_RECIPE, Recipe
 
 __all__ = [
     "ABLATION", "ABLATION_GAITS", "BARS", "CHOSEN", "GAIT_BARS", "SHOVES", "ablation_rows", "library_table", "misses",
@@ -186,11 +186,12 @@ def _verdict(label: str, missed: dict[str, str], bars: list[str]) -> str:
 
 
 def recipe_options(recipe: dict | str) -> str:
-    """A row's recipe as the ``gaitlib train`` options that set it apart from the defaults (today's recipe)."""
+    """A row's recipe as the ``gaitlib train`` options that set it apart from today's recipe (the ablation's
+    baseline, :data:`~gaitlib.training.recipe.PAPER_RECIPE`)."""
     if not isinstance(recipe, dict):
         return "today's recipe"
     recipe = json.loads(json.dumps(Recipe.from_record(recipe).as_dict()))
-    default = json.loads(json.dumps(Recipe().as_dict()))
+    default = json.loads(json.dumps(PAPER_RECIPE.as_dict()))
     kicks = recipe["push_kind"] == "kick"  # a kick's size, draw and interval are named; without kicks, none
     options = []
     for key in (k for k, v in recipe.items() if (kicks if k.startswith("kick_") else default[k] != v)):

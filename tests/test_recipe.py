@@ -21,7 +21,7 @@ from gaitlib.robots import get_robot
 from gaitlib.robots.a1.constants import TOTAL_MASS
 from gaitlib.sim import make_backend, standing_state
 from gaitlib.training import get_preset
-from gaitlib.training.recipe import Recipe
+from gaitlib.training.recipe import PAPER_RECIPE, Recipe
 
 
 def test_a_kick_changes_the_trunks_speed_by_the_drawn_amount() -> None:
@@ -72,7 +72,7 @@ def test_kicks_are_drawn_per_axis_as_the_field_draws_them() -> None:
 def test_a_recipe_recorded_before_the_kick_draw_and_cycle_sync_existed_reads_as_it_was_trained() -> None:
     recorded = {"push_kind": "kick", "kick_max": 1.0, "kick_interval": [1.0, 3.0], "terminate": "contact",
                 "contact_penalty": 0.0, "gamma": None, "lam": None, "action_delay": None, "critic_delay": False}
-    assert Recipe.from_record(recorded) == Recipe(push_kind="kick", kick_draw="disk", cycle_sync=False)
+    assert Recipe.from_record(recorded) == dataclasses.replace(PAPER_RECIPE, push_kind="kick", kick_draw="disk")
     recipe = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0, cycle_sync=True)
     assert Recipe.from_record(json.loads(json.dumps(recipe.as_dict()))) == recipe
 
@@ -162,6 +162,20 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
     ]
     share = min(1.0, 1 / get_preset("tiny").push_ramp_iterations(1))  # of the kick curriculum after one iteration
     assert training["push_max_n"] == pytest.approx(TOTAL_MASS * 0.5 * share * 30, rel=1e-5)  # m dv / dt, dt 1/30 s
+
+
+def test_the_defaults_are_the_shipped_librarys_recipe(tmp_path) -> None:
+    """``gaitlib train`` without a lever option trains with :class:`Recipe`'s defaults, and they are the recipe every
+    gait of the shipped library was trained with, so a gait added to it is trained as its gaits were."""
+    shipped = Library()
+    assert {Recipe.from_record(shipped.entry(gait).metadata["training"]["recipe"]) for gait in shipped.gaits()} == {
+        Recipe()}
+    library = tmp_path / "library"
+    trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",
+                            "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"))
+    assert trained.returncode == 0, trained.stderr
+    recorded = json.loads((library / "stand" / "metadata.json").read_text())["training"]["recipe"]
+    assert Recipe.from_record(recorded) == Recipe() and Recipe() != PAPER_RECIPE
 
 
 @pytest.mark.parametrize(

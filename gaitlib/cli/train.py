@@ -85,8 +85,9 @@ def train_command(
         64, "--eval-episodes", help="Episodes of the final evaluation (one world each);", bounds=WORLDS
     ),
     push_kind: str = typer.Option(
-        "force", "--push-kind", help="Training pushes: force (the paper's, up to the preset's largest force, 0.1-0.3 s "
-        "every 1-3 s) or kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, --kick-draw, --kick-interval)."
+        "kick", "--push-kind", help="Training pushes: kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, "
+        "--kick-draw, --kick-interval; the shipped library's) or force (the paper's, up to the preset's largest force, "
+        "0.1-0.3 s every 1-3 s)."
     ),
     kick_max: float = bounded(1.0, "--kick-max", help="With --push-kind kick: the largest change of speed a kick "
                               "gives along each axis (axes) or in all (disk);",
@@ -97,15 +98,15 @@ def train_command(
     kick_interval: str = typer.Option("1:3", "--kick-interval", help="With --push-kind kick: the quiet time before "
                                       "each kick, LOW:HIGH s, in (0, 60]."),
     terminate: str = typer.Option(
-        "contact", "--terminate", help="What ends a training episode: contact (any non-foot body on the ground, the "
-        "paper's) or trunk (the trunk too low, tilted or on the ground: legged_gym's)."
+        "trunk", "--terminate", help="What ends a training episode: trunk (the trunk too low, tilted or on the ground: "
+        "legged_gym's, the shipped library's) or contact (any non-foot body on the ground, the paper's)."
     ),
-    contact_penalty: float = bounded(0.0, "--contact-penalty", help="Reward taken off per control step while a "
-                                     "non-foot body touches the ground;", bounds=Bounds(low=0, high=10)),
-    gamma: float | None = bounded(None, "--gamma", help="PPO discount (default: the preset's, the paper's 0.95);",
-                                  bounds=Bounds(low=0, high=1, low_open=True)),
-    lam: float | None = bounded(None, "--lam", help="GAE lambda (default: the preset's);",
-                                bounds=Bounds(low=0, high=1, low_open=True)),
+    contact_penalty: float = bounded(5.0, "--contact-penalty", help="Reward taken off per control step while a "
+                                     "non-foot body touches the ground (the paper's recipe: 0);",
+                                     bounds=Bounds(low=0, high=10)),
+    gamma: float = bounded(0.99, "--gamma", help="PPO discount (rsl-rl's locomotion tasks'; the paper's: 0.95);",
+                           bounds=Bounds(low=0, high=1, low_open=True)),
+    lam: float = bounded(0.95, "--lam", help="GAE lambda;", bounds=Bounds(low=0, high=1, low_open=True)),
     action_delay: int | None = bounded(None, "--action-delay", help="Train with every action this many control "
                                        "steps late, fixed (default: Table 1's random 0-1);",
                                        bounds=Bounds(low=0, high=3, whole=True)),
@@ -117,7 +118,9 @@ def train_command(
 ) -> None:
     """Train one gait policy with PPO and write it into a library (other gaits are never touched; the shipped
     library only with --replace). The recipe's robustness levers (--push-kind, --terminate, --contact-penalty,
-    --gamma, --lam, --action-delay, --critic-delay, --cycle-sync) are recorded in the entry's metadata."""
+    --gamma, --lam, --action-delay, --critic-delay, --cycle-sync) are recorded in the entry's metadata; their defaults
+    are the shipped library's recipe, and --push-kind force --terminate contact --contact-penalty 0 --gamma 0.95 is
+    the paper's."""
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds

@@ -1,5 +1,6 @@
 """The training recipe's robustness levers, one place: how a gait is pushed, what ends its episodes, what its leg
-touches cost, its discount and its action delay. The defaults are the shipped library's recipe; each lever is an
+touches cost, its discount and its action delay. The defaults are the shipped library's recipe (the robust recipe the
+ablation in docs/results.md chose); :data:`PAPER_RECIPE` is the one of the libraries before it. Each lever is an
 option of ``gaitlib train`` and is recorded in the entry's metadata (``training.recipe``).
 
 The field's practice each lever follows:
@@ -39,7 +40,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.robots.a1.constants import TOTAL_MASS
 from gaitlib.training.presets import TrainPreset
 
-__all__ = ["PUSH_KINDS", "Recipe"]
+__all__ = ["PAPER_RECIPE", "PUSH_KINDS", "Recipe"]
 
 _KICK_DRAW_BEFORE_ITS_OPTION = "disk"  # entries recorded before kicks could be drawn per axis drew them so
 
@@ -52,7 +53,7 @@ kicks (:class:`Recipe`)."""
 class Recipe:
     """The robustness levers of a training run (the defaults: the shipped library's recipe)."""
 
-    push_kind: str = "force"
+    push_kind: str = "kick"
     """``force`` (the paper's pushes, up to the preset's ``push_max`` N) or ``kick`` (velocity kicks)."""
     kick_max: float = 1.0
     """With ``kick``: the largest change of speed a kick gives along each horizontal axis (``axes``) or in all
@@ -62,16 +63,16 @@ class Recipe:
     (a random direction, the magnitude uniform in [0, kick_max])."""
     kick_interval: tuple[float, float] = (1.0, 3.0)
     """With ``kick``: the quiet time before each kick, uniform in this range, s (mjlab: 1-3; legged_gym: 15)."""
-    terminate: str = "contact"
+    terminate: str = "trunk"
     """What ends a training episode as a fall: ``contact`` (any non-foot body on the ground, the paper's) or
     ``trunk`` (the trunk too low, tilted or on the ground; a leg's touch ridden through)."""
-    contact_penalty: float = 0.0
+    contact_penalty: float = 5.0
     """Reward taken off per control step while a non-foot body touches the ground (the imitation reward lies in
     [0, 1] per step), >= 0."""
-    gamma: float | None = None
-    """PPO discount (``None``: the preset's; the paper's 0.95)."""
-    lam: float | None = None
-    """GAE lambda (``None``: the preset's)."""
+    gamma: float | None = 0.99
+    """PPO discount (``None``: the preset's, the paper's 0.95; rsl-rl's locomotion tasks: 0.99)."""
+    lam: float | None = 0.95
+    """GAE lambda (``None``: the preset's, 0.95)."""
     action_delay: int | None = None
     """Control steps every training action waits, fixed (``None``: Table 1's random 0-1)."""
     critic_delay: bool = False
@@ -139,3 +140,9 @@ class Recipe:
         ``cycle_sync`` existed."""
         fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, "cycle_sync": False, **record}
         return cls(**{**fields, "kick_interval": tuple(fields.get("kick_interval", cls.kick_interval))})
+
+
+PAPER_RECIPE = Recipe(push_kind="force", terminate="contact", contact_penalty=0.0, gamma=None, lam=None)
+"""The recipe of the libraries shipped before the robust one (``library-paper/``, ``library-switch-start/``) and the
+robust recipe's ablation baseline ("today's"): the paper's pushes, an episode ended on any non-foot body's touch, no
+contact penalty, the preset's discount."""
