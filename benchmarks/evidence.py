@@ -10,10 +10,12 @@ from collections.abc import Iterable
 from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
+from gaitlib.stats import wilson_interval
+
 __all__ = [
     "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
     "SWITCH_START", "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
-    "read_evidence", "settings_line", "shown", "speed_heading_misses",
+    "read_evidence", "settings_line", "shown", "speed_heading_misses", "success",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,6 +68,13 @@ def pct(rate: float) -> str:
 
 def interval(low: float, high: float) -> str:
     return f"[{pct(low)}, {pct(high)}]"
+
+
+def success(successes: int, samples: int, *, goal: float | None = None) -> str:
+    """A success rate, %, with its Wilson 95% interval; bold when the counts reach ``goal`` (a fraction)."""
+    text = pct(successes / samples)
+    bold = goal is not None and successes >= goal * samples
+    return f"{f'**{text}**' if bold else text} {interval(*wilson_interval(successes, samples))}"
 
 
 def arrow(pair: str) -> str:

@@ -41,13 +41,13 @@ from evidence import (
     settings_line,
     shown,
     speed_heading_misses,
+    success,
 )
 from robustness_tables import library_table, robustness_table, shove_table
 from sweep_tables import HELD_OUT, sweep_table
 from switch_tables import SWITCH_GOALS, map_table, switches_table
 
 from gaitlib.atomic import atomic_path
-from gaitlib.stats import wilson_interval
 
 __all__ = [
     "ACCURACY", "DOC", "EVIDENCE", "SWITCH_START_ACCURACY", "TABLES", "accuracy_table", "check_doc", "fill",
@@ -77,13 +77,6 @@ INPUTS = ("latent", "explicit", "phase")
 BLOCK = re.compile(r"<!-- table: ([a-z0-9-]+) -->\n(.*?)<!-- /table -->", re.S)
 WIDTH = 120
 """The doc's line length: the tables' prose is wrapped to it (a table row or an inline code span is never broken)."""
-
-
-def _success(successes: int, samples: int, *, goal: float = GOAL) -> str:
-    """A success rate with its Wilson 95% interval, bold when it reaches ``goal``."""
-    rate = successes / samples
-    text = pct(rate)
-    return f"{f'**{text}**' if rate >= goal else text} {interval(*wilson_interval(successes, samples))}"
 
 
 def _speed(value: float) -> str:
@@ -158,7 +151,7 @@ def pairs_table(evidence_dir: Path = EVIDENCE) -> str:
     for pair in pairs:
         cells = [groups[s].get(pair) for s in groups]
         lines.append(f"| {arrow(pair)} | " + " | ".join(
-            f"{_success(c['successes'], c['samples'])} | {pct(c['touched'] / c['samples'])}%" if c else "- | -"
+            f"{success(c['successes'], c['samples'], goal=GOAL)} | {pct(c['touched'] / c['samples'])}%" if c else "- | -"
             for c in cells) + " |")
     pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
               for cells in groups.values()]
@@ -217,8 +210,8 @@ def routes_table(evidence_dir: Path = EVIDENCE, *, goal: float = GOAL) -> str:
         rate = pct(table_rates[pair][0] / table_rates[pair][1]) if pair in table_rates else "-"
         d, r = cells[pair], routed_cells[pair]
         lines.append(f"| {arrow(pair)} | {through} | {rate} | {_predicted(route, table)} "
-                     f"| {_success(d['successes'], d['samples'], goal=goal)} "
-                     f"| {_success(r['successes'], r['samples'], goal=goal)} |")
+                     f"| {success(d['successes'], d['samples'], goal=goal)} "
+                     f"| {success(r['successes'], r['samples'], goal=goal)} |")
     reached = [sum(c[p]["successes"] >= goal * c[p]["samples"] for p in pairs) for c in (cells, routed_cells)]
     lines.append(f"| at {pct(goal)}% or more | | | | {reached[0]} of {len(pairs)} | {reached[1]} of {len(pairs)} |")
     strategy, magnitude = key.split("@")

@@ -26,7 +26,6 @@ from evidence import (
     arrow,
     cite,
     groups_at,
-    interval,
     libraries_line,
     not_yet,
     pct,
@@ -34,9 +33,8 @@ from evidence import (
     read_evidence,
     settings_line,
     shown,
+    success,
 )
-
-from gaitlib.stats import wilson_interval
 
 __all__ = ["HELD_OUT", "NAME", "PAPER_OTHERS", "TO_STATIC", "sweep_table"]
 
@@ -77,7 +75,7 @@ def _rate(counts: Counts, *, touches: bool = True) -> str:
     successes, samples, touched = counts
     if samples == 0:
         return "-"
-    text = f"{pct(successes / samples)} {interval(*wilson_interval(successes, samples))}"
+    text = success(successes, samples)
     return f"{text} ({pct(touched / samples)}%)" if touches else text
 
 

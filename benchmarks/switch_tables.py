@@ -31,9 +31,8 @@ from evidence import (
     pooled,
     read_evidence,
     settings_line,
+    success,
 )
-
-from gaitlib.stats import wilson_interval
 
 __all__ = ["SWITCH_GOALS", "SwitchGoal", "map_table", "switches_table"]
 
@@ -68,11 +67,7 @@ def _cells(name: str, evidence: dict, magnitude: float, strategy: str) -> dict[s
 
 def _rate(cell: dict | None, goal: float) -> str:
     """A pair's success with its Wilson 95% interval, bold at ``goal`` or more; "-" unmeasured."""
-    if cell is None:
-        return "-"
-    successes, samples = cell["successes"], cell["samples"]
-    rate = pct(successes / samples)
-    return f"{f'**{rate}**' if successes >= goal * samples else rate} {interval(*wilson_interval(successes, samples))}"
+    return "-" if cell is None else success(cell["successes"], cell["samples"], goal=goal)
 
 
 def _reached(cells: dict[str, dict], goal: float) -> int:
@@ -98,7 +93,7 @@ def switches_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = E
               + " |" for p in pairs]
     pooled_counts = [pooled(cells.values()) if cells else None for *_, cells in columns]
     lines.append("| all pairs (touches) | " + " | ".join(
-        "-" if p is None else f"{pct(p[0] / p[1])} {interval(*wilson_interval(p[0], p[1]))} ({pct(p[2] / p[1])}%)"
+        "-" if p is None else f"{success(p[0], p[1])} ({pct(p[2] / p[1])}%)"
         for p in pooled_counts) + " |")
     lines.append("| pairs at the goal or more | " + " | ".join(
         "-" if cells is None else f"{_reached(cells, g.goal)} of {len(cells)}" for g, _, cells in columns) + " |")
