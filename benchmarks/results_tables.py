@@ -151,8 +151,8 @@ def pairs_table(evidence_dir: Path = EVIDENCE) -> str:
     for pair in pairs:
         cells = [groups[s].get(pair) for s in groups]
         lines.append(f"| {arrow(pair)} | " + " | ".join(
-            f"{success(c['successes'], c['samples'], goal=GOAL)} | {pct(c['touched'] / c['samples'])}%" if c else "- | -"
-            for c in cells) + " |")
+            f"{success(c['successes'], c['samples'], goal=GOAL)} | {pct(c['touched'] / c['samples'])}%"
+            if c else "- | -" for c in cells) + " |")
     pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
               for cells in groups.values()]
     lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{pct(s / n)} | {pct(t / n)}%" for s, n, t in pooled)

@@ -4,10 +4,9 @@ the others.
 
 - ``robustness-gaits``: the robust recipe's ablation, ``docs/results/ablation/GAIT-VARIANT.json`` for each gait of
   :data:`ABLATION_GAITS` (``GAIT-today.json``: the switch-start library's gait, today's recipe: the recipe before
-  the ablation), each ``{"command", "result"}`` as
-  ``benchmarks/robust_ablation.py`` writes it (the date is the result's own ``made``): falls and leg touches with
-  their 95% intervals, each row's recipe, and each row against :data:`BARS` and :data:`GAIT_BARS`, read from its
-  numbers.
+  the ablation), each ``{"command", "result"}`` as ``benchmarks/robust_ablation.py`` writes it (the date is the
+  result's own ``made``): falls and leg touches with their 95% intervals, each row's recipe, and each row against
+  :data:`BARS` and :data:`GAIT_BARS`, read from its numbers.
 - ``robust-library``: each of the six gaits with today's recipe (``GAIT-today.json``, ``library-switch-start/``)
   beside the same gait in the shipped library (``GAIT-`` :data:`CHOSEN` ``.json``), each against every bar.
 - ``shove-curves``: every gait's falls under one shove of each impulse in both libraries, from the same rows.
@@ -31,7 +30,7 @@ from evidence import (
     interval,
     not_yet,
     pct,
-        speed_heading_misses,
+    speed_heading_misses,
 )
 
 from gaitlib.training.recipe import PAPER_RECIPE, Recipe
@@ -263,13 +262,19 @@ def _library_row(gait: str, library: str, row: dict, met: str) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def _library_rows(ablation_dir: Path) -> tuple[dict[tuple[str, str], Path], dict[tuple[str, str], tuple[Path, dict]]]:
+    """Each (gait, library) of :data:`GAITS` and :data:`LIBRARIES`: the path of its row, and the rows stored (path,
+    row), in the tables' order."""
+    paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
+             for gait in GAITS for variant, library in LIBRARIES}
+    return paths, {key: (path, row) for key, path in paths.items() if (row := read_row(path)) is not None}
+
+
 def library_table(ablation_dir: Path = ABLATION) -> str:
     """``robust-library``: each gait of :data:`GAITS` trained with today's recipe (the switch-start library,
     ``GAIT-today.json``) and with the :data:`CHOSEN` one (the shipped library), side by side against the bars; the
     touches of both judged against the switch-start gait's."""
-    paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
-             for gait in GAITS for variant, library in LIBRARIES}
-    found = {key: (path, row) for key, path in paths.items() if (row := read_row(path)) is not None}
+    paths, found = _library_rows(ablation_dir)
     robust = [gait for gait in GAITS if (gait, "robust") in found]
     if not robust:
         return not_yet(*(Path(ablation_dir) / f"{gait}-{CHOSEN}.json" for gait in GAITS))
@@ -297,10 +302,8 @@ def library_table(ablation_dir: Path = ABLATION) -> str:
 def shove_table(ablation_dir: Path = ABLATION) -> str:
     """Every gait's falls under one shove of each impulse in each library of :data:`LIBRARIES`, with its interval,
     the worst direction at the bar's impulse and the touches there."""
-    paths = {(gait, library): Path(ablation_dir) / f"{gait}-{variant}.json"
-             for gait in GAITS for variant, library in LIBRARIES}
-    curves = {key: (row["result"]["figures"]["single_shove"], path, row)
-              for key, path in paths.items() if (row := read_row(path)) is not None}
+    paths, found = _library_rows(ablation_dir)
+    curves = {key: (row["result"]["figures"]["single_shove"], path, row) for key, (path, row) in found.items()}
     absent = [path for key, path in paths.items() if key not in curves]
     if not curves:
         return not_yet(*absent)
