@@ -15,7 +15,8 @@ from gaitlib.stats import wilson_interval
 __all__ = [
     "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
     "SWITCH_START", "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
-    "read_evidence", "settings_line", "shown", "speed_heading_misses", "success",
+    "pooled_success", "reached", "reaches", "read_evidence", "settings_line", "shown", "speed_heading_misses",
+    "success",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,11 +71,31 @@ def interval(low: float, high: float) -> str:
     return f"[{pct(low)}, {pct(high)}]"
 
 
+def reaches(successes: int, samples: int, goal: float) -> bool:
+    """Whether ``successes`` of ``samples`` reach ``goal`` (a fraction), by the counts, not a rounded rate."""
+    return successes >= goal * samples
+
+
+def reached(cells: Iterable[dict], goal: float) -> int:
+    """How many of a benchmark's ``cells`` (each with ``successes`` and ``samples``) reach ``goal``."""
+    return sum(reaches(c["successes"], c["samples"], goal) for c in cells)
+
+
 def success(successes: int, samples: int, *, goal: float | None = None) -> str:
     """A success rate, %, with its Wilson 95% interval; bold when the counts reach ``goal`` (a fraction)."""
     text = pct(successes / samples)
-    bold = goal is not None and successes >= goal * samples
+    bold = goal is not None and reaches(successes, samples, goal)
     return f"{f'**{text}**' if bold else text} {interval(*wilson_interval(successes, samples))}"
+
+
+def pooled_success(counts: tuple[int, int, int], *, touches: bool = True) -> str:
+    """Pooled counts (:func:`pooled`) as :func:`success`, the share of touched transitions beside in parentheses;
+    "-" without transitions."""
+    successes, samples, touched = counts
+    if samples == 0:
+        return "-"
+    text = success(successes, samples)
+    return f"{text} ({pct(touched / samples)}%)" if touches else text
 
 
 def arrow(pair: str) -> str:

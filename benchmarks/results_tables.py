@@ -37,6 +37,8 @@ from evidence import (
     interval,
     not_yet,
     pct,
+    pooled,
+    reached,
     read_evidence,
     settings_line,
     shown,
@@ -153,14 +155,13 @@ def pairs_table(evidence_dir: Path = EVIDENCE) -> str:
         lines.append(f"| {arrow(pair)} | " + " | ".join(
             f"{success(c['successes'], c['samples'], goal=GOAL)} | {pct(c['touched'] / c['samples'])}%"
             if c else "- | -" for c in cells) + " |")
-    pooled = [[sum(c[k] for c in cells.values()) for k in ("successes", "samples", "touched")]
-              for cells in groups.values()]
-    lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{pct(s / n)} | {pct(t / n)}%" for s, n, t in pooled)
+    totals = [pooled(cells.values()) for cells in groups.values()]
+    lines.append(f"| all {len(pairs)} pairs | " + " | ".join(f"{pct(s / n)} | {pct(t / n)}%" for s, n, t in totals)
                  + " |")
-    reached = [sum(c["successes"] >= GOAL * c["samples"] for c in cells.values()) for cells in groups.values()]
-    counts = [f"{k} of {len(cells)} | " for k, cells in zip(reached, groups.values(), strict=True)]
+    at_goal = [reached(cells.values(), GOAL) for cells in groups.values()]
+    counts = [f"{k} of {len(cells)} | " for k, cells in zip(at_goal, groups.values(), strict=True)]
     lines.append(f"| pairs at {pct(GOAL)}% or more | " + " | ".join(counts) + " |")
-    summary = ", ".join(f"`{s}` {k} of {len(c)}" for (s, c), k in zip(groups.items(), reached, strict=True))
+    summary = ", ".join(f"`{s}` {k} of {len(c)}" for (s, c), k in zip(groups.items(), at_goal, strict=True))
     return "\n".join([*lines, "", f"Pairs at {pct(GOAL)}% or more: {summary}. "
                       f"{settings_line(evidence['result']['settings'])}; a touch: a non-foot body on the ground from "
                       "the request to the verdict, ridden through.", "", f"Evidence: {cite(path, evidence)}"])
@@ -212,10 +213,10 @@ def routes_table(evidence_dir: Path = EVIDENCE, *, goal: float = GOAL) -> str:
         lines.append(f"| {arrow(pair)} | {through} | {rate} | {_predicted(route, table)} "
                      f"| {success(d['successes'], d['samples'], goal=goal)} "
                      f"| {success(r['successes'], r['samples'], goal=goal)} |")
-    reached = [sum(c[p]["successes"] >= goal * c[p]["samples"] for p in pairs) for c in (cells, routed_cells)]
-    lines.append(f"| at {pct(goal)}% or more | | | | {reached[0]} of {len(pairs)} | {reached[1]} of {len(pairs)} |")
+    at_goal = [reached((c[p] for p in pairs), goal) for c in (cells, routed_cells)]
+    lines.append(f"| at {pct(goal)}% or more | | | | {at_goal[0]} of {len(pairs)} | {at_goal[1]} of {len(pairs)} |")
     strategy, magnitude = key.split("@")
-    notes = [f"Routed, {reached[1]} of {len(pairs)} pairs reach {pct(goal)}%; directly, {reached[0]}. Both "
+    notes = [f"Routed, {at_goal[1]} of {len(pairs)} pairs reach {pct(goal)}%; directly, {at_goal[0]}. Both "
              f"benchmarks: `{strategy}` at {magnitude} N, {settings_line(routed['result']['settings'])}."]
     if table is not None:
         measured = table["result"].get("measured_with", {})

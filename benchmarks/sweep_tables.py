@@ -28,12 +28,11 @@ from evidence import (
     groups_at,
     libraries_line,
     not_yet,
-    pct,
     pooled,
+    pooled_success,
     read_evidence,
     settings_line,
     shown,
-    success,
 )
 
 __all__ = ["HELD_OUT", "NAME", "PAPER_OTHERS", "TO_STATIC", "sweep_table"]
@@ -71,14 +70,6 @@ def _share(counts: Counts) -> float:
     return counts[0] / counts[1]
 
 
-def _rate(counts: Counts, *, touches: bool = True) -> str:
-    successes, samples, touched = counts
-    if samples == 0:
-        return "-"
-    text = success(successes, samples)
-    return f"{text} ({pct(touched / samples)}%)" if touches else text
-
-
 def _margin(sweep: dict[str, dict[float, dict[str, dict]]]) -> str | None:
     """The paper's ``net`` over the best of :data:`PAPER_OTHERS` on :data:`TO_STATIC`, in points; ``None`` when the
     sweep lacks ``net``, the others or those pairs."""
@@ -108,8 +99,8 @@ def sweep_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = EVID
              + " | " + " | ".join(f"{library}: {static} [95%] (touches)" for library in sweeps) + " |",
              "|---|" + "---|" * (2 * len(sweeps))]
     for strategy in strategies:
-        cells = [_rate(_over(sweep[strategy])) if strategy in sweep else "-" for sweep in sweeps.values()]
-        cells += [_rate(_over(sweep[strategy], TO_STATIC)) if strategy in sweep else "-" for sweep in sweeps.values()]
+        cells = [pooled_success(_over(sweep[strategy], pairs)) if strategy in sweep else "-"
+                 for pairs in (None, TO_STATIC) for sweep in sweeps.values()]
         lines.append(f"| `{strategy}` | " + " | ".join(cells) + " |")
     run = libraries_line({library: settings_line(e["result"]["settings"]) for library, e in stored.items()})
     ranks = []
@@ -123,7 +114,7 @@ def sweep_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = EVID
     for library, sweep in sweeps.items() if len(magnitudes) > 1 else ():
         rows = ["| push, N | " + " | ".join(f"`{s}`" for s in sweep) + " |", "|---|" + "---|" * len(sweep)]
         rows += [f"| {magnitude:g} | " + " | ".join(
-            _rate(pooled(by_m[magnitude].values()), touches=False) if magnitude in by_m else "-"
+            pooled_success(pooled(by_m[magnitude].values()), touches=False) if magnitude in by_m else "-"
             for by_m in sweep.values()) + " |" for magnitude in magnitudes]
         parts += [f"{library.capitalize()} library, each strategy's success % over every pair at each push magnitude "
                   "[95%]:", "\n".join(rows)]

@@ -29,6 +29,8 @@ from evidence import (
     not_yet,
     pct,
     pooled,
+    pooled_success,
+    reached,
     read_evidence,
     settings_line,
     success,
@@ -70,10 +72,6 @@ def _rate(cell: dict | None, goal: float) -> str:
     return "-" if cell is None else success(cell["successes"], cell["samples"], goal=goal)
 
 
-def _reached(cells: dict[str, dict], goal: float) -> int:
-    return sum(c["successes"] >= goal * c["samples"] for c in cells.values())
-
-
 def switches_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = EVIDENCE) -> str:
     """``switches``: each pair's success in the switch-start library and in the shipped robust one, setting by setting
     of :data:`SWITCH_GOALS`, with the pooled rate, its touches, and the pairs at the goal in each."""
@@ -91,15 +89,14 @@ def switches_table(switch_start_dir: Path = SWITCH_START, evidence_dir: Path = E
              "|---|" + "---|" * len(columns)]
     lines += [f"| {arrow(p)} | " + " | ".join(_rate(cells.get(p) if cells else None, g.goal) for g, _, cells in columns)
               + " |" for p in pairs]
-    pooled_counts = [pooled(cells.values()) if cells else None for *_, cells in columns]
     lines.append("| all pairs (touches) | " + " | ".join(
-        "-" if p is None else f"{success(p[0], p[1])} ({pct(p[2] / p[1])}%)"
-        for p in pooled_counts) + " |")
+        "-" if cells is None else pooled_success(pooled(cells.values())) for *_, cells in columns) + " |")
     lines.append("| pairs at the goal or more | " + " | ".join(
-        "-" if cells is None else f"{_reached(cells, g.goal)} of {len(cells)}" for g, _, cells in columns) + " |")
+        "-" if cells is None else f"{reached(cells.values(), g.goal)} of {len(cells)}" for g, _, cells in columns)
+                 + " |")
     notes = []
     for goal in goals:
-        counts = [f"{library} {_reached(cells, goal.goal)} of {len(cells)}"
+        counts = [f"{library} {reached(cells.values(), goal.goal)} of {len(cells)}"
                   for g, library, cells in columns if g is goal and cells]
         runs = {library: settings_line(e["result"]["settings"]) for library in folders
                 if (e := stored[library, goal.name])}
