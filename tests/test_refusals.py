@@ -146,10 +146,12 @@ def test_resume_from_a_truncated_or_foreign_checkpoint_is_one_line(tmp_path) -> 
     torch.save({"actor_state_dict": {"w": torch.zeros(3)}, "iter": 5, "infos": {"gait": "stand"}}, latest)
     whole = latest.read_bytes()
     _refused(gaitlib_quick(*args), f"checkpoint {latest} is not a gaitlib training checkpoint (no complete run "
-             "record); train afresh without --resume")
+             f"record) and cannot be resumed; give this run its own --run-dir, or remove {latest} to start over in "
+             "its folder")
     latest.write_bytes(whole[: len(whole) // 2])
     _refused(gaitlib_quick(*args), f"checkpoint {latest} is unreadable (truncated, or not a plain torch "
-             "checkpoint); train afresh without --resume")
+             f"checkpoint) and cannot be resumed; give this run its own --run-dir, or remove {latest} to start over "
+             "in its folder")
     assert not (tmp_path / "lib").exists()
 
 

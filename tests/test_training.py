@@ -114,7 +114,7 @@ def test_resume_refuses_a_checkpoint_of_another_gait(tmp_path) -> None:
     from gaitlib.errors import GaitlibError
 
     train_gait(request(tmp_path, iterations=1))
-    with pytest.raises(GaitlibError, match=r"is of another training run \(gait 'stand', not 'trot'\)"):
+    with pytest.raises(GaitlibError, match=r"is of another training run: GAIT: gait 'stand' then, 'trot' now"):
         train_gait(request(tmp_path, gait="trot", iterations=2, resume=True, run_dir=tmp_path / "runs" / "stand"))
 
 

@@ -29,6 +29,7 @@ from gaitlib.library.policy import GaitPolicy
 from gaitlib.library.store import Library
 from gaitlib.library.target import copy_library, library_writer
 from gaitlib.sim import make_backend, resolve_backend_name
+from gaitlib.training.checkpoint import check_same_run, read_checkpoint, run_identity, start_over
 from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_in_sync, rank_device
 from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
@@ -117,6 +118,8 @@ class GaitRunner(OnPolicyRunner):
         """Training time so far, s (resumed runs included)."""
         self.curve: list[list] = []
         """Learning-curve rows: iteration, training time s, mean reward, mean episode s (None: none ended)."""
+        self.identity = run_identity(request)
+        """What the run trains from, as its checkpoints record it (:mod:`gaitlib.training.checkpoint`)."""
 
     def _configure_multi_gpu(self) -> None:
         """rsl-rl's own multi-GPU setup for CUDA ranks (NCCL); a CPU rank joins over gloo with the same settings
@@ -141,14 +144,9 @@ class GaitRunner(OnPolicyRunner):
             torch.save(state, tmp)
 
     def checkpoint(self, name: str = "latest.pt") -> None:
-        """Save the run under ``checkpoints/name`` with its record (gait, preset, seed, samples, time, curve)."""
-        record = {
-            "gait": self.request.description.name,
-            "preset": self.request.preset.name,
-            "switch_start": self.request.switch_start,
-            "seed": self.request.seed,
-            "library": str(Path(self.request.library).resolve()),
-            "recipe": self.request.recipe.as_dict(),
+        """Save the run under ``checkpoints/name`` with its record: its identity
+        (:func:`~gaitlib.training.checkpoint.run_identity`), world size, samples, time and curve."""
+        record = self.identity | {
             "world_size": self.ranks.world_size,
             "samples": self.samples,
             "elapsed_s": self.elapsed,
@@ -156,31 +154,18 @@ class GaitRunner(OnPolicyRunner):
         }
         self.save(str(self.checkpoints / name), record)
 
-    def resume(self) -> None:
-        """Continue from ``checkpoints/latest.pt``; a missing, damaged or foreign checkpoint, or one of another gait
-        or preset, is refused in one line."""
+    def resume(self, saved: dict) -> None:
+        """Continue from ``saved``, the run's latest checkpoint as :func:`train_gait` read and checked it; one that
+        does not fit the preset's networks is refused in one line."""
         latest = self.checkpoints / "latest.pt"
-        saved = _read_checkpoint(latest, device=self.device)
-        record = saved["infos"]
-        asked = {"gait": self.request.description.name, "preset": self.request.preset.name,
-                 "seed": self.request.seed, "library": str(Path(self.request.library).resolve()),
-                 "recipe": self.request.recipe.as_dict()}
-        differ = [f"{k} {record.get(k)!r}, not {v!r}" for k, v in asked.items() if record.get(k, v) != v]
-        if differ:
-            raise GaitlibError(f"checkpoint {latest} is of another training run ({'; '.join(differ)}); resume it as "
-                               "it was started, or train afresh into another --run-dir")
-        if record.get("switch_start", 0.0) != self.request.switch_start:
-            raise GaitlibError(
-                f"checkpoint {latest} trained with --switch-start {record.get('switch_start', 0.0):g}, not "
-                f"{self.request.switch_start:g}; resume with the same share"
-            )
         try:
             self.alg.load(saved, None, strict=True)
         except (KeyError, RuntimeError, TypeError, ValueError) as error:
             raise GaitlibError(
                 f"checkpoint {latest} does not fit the preset's networks ({str(error).splitlines()[0][:120]}); "
-                "train afresh without --resume"
+                f"{start_over(latest)}"
             ) from error
+        record = saved["infos"]
         self.current_learning_iteration = saved["iter"]
         self.samples, self.elapsed, self.curve = record["samples"], record["elapsed_s"], record["curve"]
 
@@ -262,27 +247,39 @@ def train_gait(
     states = handover_states(request.states, request.switch_start, gait=request.description.name)  # before any file
     ranks = Ranks.from_env()
     if not ranks.main:
-        return _train(request, ranks, on_iteration, states)
+        return _train(request, ranks, on_iteration, states, _resume_point(request))
     lock = request.run_dir / ".run.lock"
     fd = take_lock(lock, writing=f"training run folder {request.run_dir}", error=GaitlibError)
     try:
         latest = request.run_dir / "checkpoints" / "latest.pt"
         if not request.resume and latest.is_file():
+            read_checkpoint(latest, device="cpu")  # one that cannot be resumed says so, not "use --resume"
             raise GaitlibError(
                 f"{request.run_dir} belongs to another training run (it holds {latest}); continue that run with "
-                "--resume, or give this one its own --run-dir"
+                f"--resume and the inputs it was started with, or {start_over(latest)}"
             )
-        return _train(request, ranks, on_iteration, states)
+        return _train(request, ranks, on_iteration, states, _resume_point(request))
     finally:
         release_lock(lock, fd)
 
 
+def _resume_point(request: TrainRequest) -> dict | None:
+    """With ``request.resume``: the run's latest checkpoint, read and shown to be of this very run (every input the
+    same: :func:`~gaitlib.training.checkpoint.check_same_run`) before any simulation is built; else ``None``."""
+    if not request.resume:
+        return None
+    latest = request.run_dir / "checkpoints" / "latest.pt"
+    saved = read_checkpoint(latest, device="cpu")
+    check_same_run(saved["infos"], run_identity(request), path=latest)
+    return saved
+
+
 def _train(
     request: TrainRequest, ranks: Ranks, on_iteration: Callable[[IterationStats], None] | None,
-    handover: tuple[HandoverStates | None, dict | None],
+    handover: tuple[HandoverStates | None, dict | None], saved: dict | None,
 ) -> TrainResult | None:
     """:func:`train_gait` once its run folder is its own; ``handover``: the states and their record
-    (:func:`~gaitlib.training.switch_start.handover_states`)."""
+    (:func:`~gaitlib.training.switch_start.handover_states`); ``saved``: the checkpoint to continue, else ``None``."""
     seed = request.seed + ranks.rank
     torch.manual_seed(seed)
     preset = request.preset
@@ -297,8 +294,8 @@ def _train(
             sim, [clip], env_cfg, seed=seed, handover=states, handover_share=request.switch_start if states else 0.0
         )
         runner = GaitRunner(env, request)
-        if request.resume:
-            runner.resume()
+        if saved is not None:
+            runner.resume(saved)
         runner.train(on_iteration=on_iteration)
         in_sync = parameters_in_sync(runner.alg.get_policy(), device=str(runner.device))
     finally:
@@ -368,32 +365,6 @@ def _finish(
         wall_clock_s=runner.elapsed,
         evaluation=evaluation,
     )
-
-
-_RECORD = {"gait": str, "preset": str, "samples": int, "elapsed_s": (int, float), "curve": list}
-"""The run record a gaitlib checkpoint keeps in ``infos``: key -> type."""
-
-
-def _read_checkpoint(path: Path, *, device: str) -> dict:
-    """The checkpoint at ``path`` (tensors and plain data only: ``weights_only``), with a complete run record; a
-    one-line :class:`GaitlibError` for a missing, truncated or foreign file."""
-    if not path.is_file():
-        raise GaitlibError(f"nothing to resume: no checkpoint at {path}")
-    try:
-        saved = torch.load(path, map_location=device, weights_only=True)
-    except Exception as error:  # torch raises several unrelated types for a truncated or foreign file
-        raise GaitlibError(
-            f"checkpoint {path} is unreadable (truncated, or not a plain torch checkpoint); "
-            "train afresh without --resume"
-        ) from error
-    record = saved.get("infos") if isinstance(saved, dict) else None
-    complete = isinstance(record, dict) and all(isinstance(record.get(k), t) for k, t in _RECORD.items())
-    if not (complete and isinstance(saved.get("iter"), int)):
-        raise GaitlibError(
-            f"checkpoint {path} is not a gaitlib training checkpoint (no complete run record); "
-            "train afresh without --resume"
-        )
-    return saved
 
 
 def _thin_curve(rows: list[list], *, most: int = _CURVE_ROWS) -> list[list]:
