@@ -100,7 +100,8 @@ def _difference(key: str, then: object, now: object) -> str:
     """One input that differs, named by its option and, for a description or a recipe, its first differing field."""
     if key == "states_sha256":
         if then is None or now is None:
-            return f"--states: {'none' if then is None else 'a states file'} then, {'none' if now is None else 'one'} now"
+            given = ("no states file", "a states file")
+            return f"--states: {given[then is not None]} then, {given[now is not None]} now"
         return f"--states: the file's content differs (SHA-256 {then[:12]} then, {now[:12]} now)"
     if isinstance(then, Mapping) and isinstance(now, Mapping):
         field = next(k for k in sorted(set(then) | set(now)) if then.get(k) != now.get(k))
