@@ -17,7 +17,7 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
-from gaitlib.cli.train import SWITCH_START
+from gaitlib.defaults import SWITCH_START
 from gaitlib.gaits import get_gait
 from gaitlib.training import get_preset
 from gaitlib.training.recipe import PAPER_RECIPE, Recipe

@@ -24,16 +24,15 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from evidence import BAR_HEADING_DEG, BAR_SPEED
-
 from gaitlib.atomic import write_json
 from gaitlib.benchmark.push_curve import single_push_curve
 from gaitlib.benchmark.switch_in import switch_in
-from gaitlib.cli.options import parse_values
+from gaitlib.defaults import BAR_HEADING_DEG, BAR_SPEED
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.handover import load_states
 from gaitlib.library import Library
 from gaitlib.training.evaluate import evaluate_policy
+from gaitlib.values import IMPULSE_NS, parse_values
 
 __all__ = ["ablation_row"]
 
@@ -103,8 +102,6 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
-    from gaitlib.cli.options import IMPULSE_NS
-
     impulses = parse_values(args.impulses, option="--impulses", bounds=IMPULSE_NS, example="0:30:6")
     row = ablation_row(Library(args.library), args.gait, states=args.states, sources=args.sources.split(","),
                        impulses=impulses, episodes=args.episodes, switches=args.switches, seconds=args.seconds,

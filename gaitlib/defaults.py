@@ -3,7 +3,10 @@ can show them in ``--help`` without importing torch."""
 
 from __future__ import annotations
 
-__all__ = ["COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "FALL_DEFINITIONS"]
+__all__ = [
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "FALL_DEFINITIONS",
+    "SWITCH_START",
+]
 
 COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
 """The switching strategies ``gaitlib benchmark`` compares by default: the paper's Fig. 4 baselines, its rule
@@ -17,3 +20,9 @@ past the limit or on the ground, as legged_gym's and Isaac Lab's A1 tasks count 
 a *touch*, reported beside), and ``contact``, gaitlib's strict one (any non-foot body on the ground is a fall too)."""
 DEFAULT_FALLS = "trunk"
 """The definition every report, label and artefact uses unless told otherwise."""
+SWITCH_START = 0.4
+"""The share of training episodes that start from another gait's handover state when ``--states`` is given: most
+episodes still start from the gait's own reference, which teaches the gait itself (``docs/training.md``)."""
+BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
+"""The quality bar a gait is judged against (``docs/results.md``): falls in at most 1% of episodes, forward speed
+within 10% of the reference (a fraction), median heading change over an episode at most 15 degrees."""

@@ -221,12 +221,8 @@ def test_an_ablation_row_measures_a_fixed_delay_variant_at_its_trained_delay(tmp
     """``benchmarks/robust_ablation.py`` on a stand trained with every action one step late: 0 N at that delay and
     one step later, pushes while walking at Table 1's random delay like every other figure; its recipe, training
     time and every figure recorded."""
-    import importlib
-    import sys
-    from pathlib import Path
+    from benchmarks import robust_ablation as ablation
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    ablation = importlib.import_module("robust_ablation")
     library = tmp_path / "library"
     trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",
                             "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"),

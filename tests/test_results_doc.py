@@ -1,10 +1,9 @@
-"""docs/results.md's generated tables are what benchmarks/results_tables.py makes of the stored evidence, and a
+"""The results pages' generated tables are what ``python -m benchmarks.results`` makes of the stored evidence, and a
 figure changed by hand is caught; the tables themselves from small evidence files made here."""
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import itertools
 import json
 import re
@@ -15,18 +14,16 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.results import doc as tables
+from benchmarks.results import robustness
+from benchmarks.results import switches as switching
+from benchmarks.results.evidence import pct
 from gaitlib.stats import wilson_interval
+from gaitlib.strategies.fitting import PAPER_PAIRS
 from gaitlib.training.recipe import PAPER_RECIPE
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "benchmarks" / "results_tables.py"
 GAITS = ("bound", "pace", "pronk", "stand", "trot", "walk")
-
-
-sys.path.insert(0, str(SCRIPT.parent))  # the benchmarks import each other by name, as when run as scripts
-tables = importlib.import_module("results_tables")
-robustness = importlib.import_module("robustness_tables")
-switching = importlib.import_module("switch_tables")
 
 
 def _store(folder: Path, name: str, result: dict, command: str = "gaitlib made-up") -> Path:
@@ -97,19 +94,23 @@ def _accuracy(path: Path, *, latent: float = 0.75, explicit: float = 0.74, phase
               "input_written": "latent", "falls": "trunk",
               "balanced_validation_accuracy": {k: dict.fromkeys(pairs, v) for k, v in
                                                (("latent", latent), ("phase", phase), ("explicit", explicit))},
-              "paper_table_3": {"latent": dict.fromkeys(tables.PAPER_PAIRS, 0.8915)}}
+              "paper_table_3": {"latent": dict.fromkeys(PAPER_PAIRS, 0.8915)}}
     path.write_text(json.dumps(report))
     return path
 
 
 def _doc(path: Path) -> Path:
-    blocks = "\n\n".join(f"## {name}\n\n<!-- table: {name} -->\nold\n<!-- /table -->" for name in tables.TABLES)
+    """A results page at ``path`` (its file name one of the pages) with every block it holds, each out of date."""
+    blocks = "\n\n".join(f"## {name}\n\n<!-- table: {name} -->\nold\n<!-- /table -->"
+                         for name in tables.page_tables(path))
     path.write_text(f"# Results\n\nProse stays as written.\n\n{blocks}\n\nThe end.\n")
     return path
 
 
-def test_the_doc_is_what_the_stored_evidence_makes() -> None:
-    assert tables.check_doc() is None, "python benchmarks/results_tables.py rewrites docs/results.md"
+def test_every_page_is_what_the_stored_evidence_makes() -> None:
+    made = tables.render_tables()
+    assert {doc.name: tables.check_doc(doc, tables=made) for doc in tables.DOCS} == dict.fromkeys(
+        (doc.name for doc in tables.DOCS), None), "python -m benchmarks.results rewrites them"
 
 
 def test_a_figure_changed_by_hand_is_caught(tmp_path: Path) -> None:
@@ -124,8 +125,8 @@ def test_a_figure_changed_by_hand_is_caught(tmp_path: Path) -> None:
     assert edited != text
     copy.write_text(edited)
     assert tables.check_doc(copy) == "quality-bar"
-    done = subprocess.run([sys.executable, str(SCRIPT), "--check", "--doc", str(copy)], capture_output=True,
-                          text=True, timeout=60, check=False)
+    done = subprocess.run([sys.executable, "-m", "benchmarks.results", "--check", "--doc", str(copy)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 1 and "'quality-bar'" in done.stderr
     assert tables.main(["--doc", str(copy)]) == 0 and tables.check_doc(copy) is None
     assert copy.read_text() == text  # the rewrite puts the figure back, and nothing else moves
@@ -186,9 +187,10 @@ def test_rewriting_touches_only_the_blocks(tmp_path: Path, evidence: Path) -> No
     assert text.startswith("# Results\n\nProse stays as written.\n\n## quality-bar\n\n<!-- table: quality-bar -->\n\n")
     assert text.endswith("<!-- /table -->\n\nThe end.\n") and "latent >= explicit does not hold" in _flat(text)
     assert tables.check_doc(doc, evidence, accuracy) is None
-    _store(evidence, "bench-direct", _benchmark({"net-lookahead": {"trot-pace": _cell(931), "pronk-trot": _cell(950)}},
-                                                seed=1))
-    assert tables.check_doc(doc, evidence, accuracy) == "routes"  # a stored result replaced, the doc not rewritten
+    stored = json.loads((evidence / "bench-0n.json").read_text())
+    stored["result"]["groups"]["random@0"]["cells"]["trot-pace"]["successes"] = 901
+    (evidence / "bench-0n.json").write_text(json.dumps(stored))
+    assert tables.check_doc(doc, evidence, accuracy) == "switches"  # a stored result replaced, the doc not rewritten
     assert list(tmp_path.glob(".results.md.*")) == []  # no temporary left beside the doc
 
 
@@ -196,12 +198,34 @@ def test_a_doc_without_a_tables_block_is_refused(tmp_path: Path, evidence: Path)
     doc = tmp_path / "results.md"
     quality = tables.render_tables(evidence, tmp_path / "accuracy.json")["quality-bar"]
     doc.write_text(f"# Results\n\n<!-- table: quality-bar -->\n\n{quality}\n\n<!-- /table -->\n")
-    with pytest.raises(ValueError, match="robustness-gaits"):
+    with pytest.raises(ValueError, match="shove-curves"):
         tables.write_doc(doc, evidence, tmp_path / "accuracy.json")
-    assert tables.check_doc(doc, evidence, tmp_path / "accuracy.json") == "robustness-gaits"  # the first block agrees
+    assert tables.check_doc(doc, evidence, tmp_path / "accuracy.json") == "shove-curves"  # the first block agrees
     doc.write_text("<!-- table: quality-bar -->\n<!-- /table -->\n<!-- table: quality-bar -->\n<!-- /table -->\n")
     with pytest.raises(ValueError, match="repeated"):
         tables.check_doc(doc, evidence, tmp_path / "accuracy.json")
+
+
+def test_each_table_is_on_its_own_page(tmp_path: Path, evidence: Path) -> None:
+    """Every table belongs to one page; a block on another page, or a file that is no results page, is refused in
+    one line before anything is written, and the page's other blocks are written as on the results page."""
+    assert sorted(tables.TABLES) == sorted(set(tables.TABLES))
+    ablation = _doc(tmp_path / "ablation.md")
+    assert tables.write_doc(ablation, evidence, tmp_path / "accuracy.json")
+    assert "Not yet measured:" in ablation.read_text() and "<!-- table: robust-library -->" in ablation.read_text()
+    switching_page = _doc(tmp_path / "switching_results.md")
+    assert tables.write_doc(switching_page, evidence, tmp_path / "accuracy.json")
+    assert "| trot → pace | stand | 92.0 | 98.8 |" in switching_page.read_text()
+    misplaced = tmp_path / "results.md"
+    misplaced.write_text("<!-- table: routes -->\nold\n<!-- /table -->\n")
+    with pytest.raises(ValueError, match="the table marker 'routes' is for docs/switching_results.md"):
+        tables.write_doc(misplaced, evidence, tmp_path / "accuracy.json")
+    other = tmp_path / "notes.md"
+    other.write_text("<!-- table: quality-bar -->\nold\n<!-- /table -->\n")
+    done = subprocess.run([sys.executable, "-m", "benchmarks.results", "--doc", str(ablation), "--doc", str(other)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 2 and "notes.md is not a results page" in done.stderr
+    assert other.read_text() == "<!-- table: quality-bar -->\nold\n<!-- /table -->\n"
 
 
 def _shove(impulse: float, falls: dict[str, int], *, per_sector: int = 256, touches: int = 5) -> dict:
@@ -326,7 +350,7 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
 
 def _interval(count: int, total: int) -> str:
     low, high = wilson_interval(count, total)
-    return f"[{tables.pct(low)}, {tables.pct(high)}]"
+    return f"[{pct(low)}, {pct(high)}]"
 
 
 def test_the_shipped_librarys_switches_beside_the_switch_start_ones_from_small_evidence(tmp_path: Path,

@@ -9,15 +9,13 @@ parallel worlds costs in memory is checked against the machine by :func:`check_w
 
 from __future__ import annotations
 
-import math
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import typer
 
 from gaitlib.defaults import DEFAULT_FALLS, FALL_DEFINITIONS
-from gaitlib.errors import GaitlibError
+from gaitlib.values import IMPULSE_NS, MAX_MAGNITUDES, Bounds, OptionError, parse_values
 
 __all__ = [
     "CHUNK",
@@ -51,52 +49,6 @@ __all__ = [
 WORLD_BYTES = 1 << 20
 """Host memory one MuJoCo world costs, bytes: measured 0.68 MiB per world (peak RSS of the A1 backend with its
 imitation environment, 2048 worlds against 256, stepped), rounded up to 1 MiB."""
-MAX_MAGNITUDES = 1000
-"""Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
-
-
-class OptionError(GaitlibError):
-    """An option value the command does not accept (exit code 2, like other usage errors)."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class Bounds:
-    """The values a numeric option accepts."""
-
-    low: float
-    """Smallest value (excluded when ``low_open``), in ``unit``."""
-    high: float
-    """Largest value, in ``unit``."""
-    unit: str = ""
-    """Unit of the value (SI, or min for training time; empty for counts)."""
-    whole: bool = False
-    """Only whole numbers (counts, seeds)."""
-    low_open: bool = False
-    """``low`` itself is refused (durations that must be positive)."""
-
-    def describe(self) -> str:
-        """The range as the help and the errors write it, e.g. ``[0, 2000] N`` or ``(0, 600] s``."""
-        text = f"{'(' if self.low_open else '['}{_number(self.low)}, {_number(self.high)}]"
-        return f"{text} {self.unit}" if self.unit else text
-
-    def check(self, option: str, value: float | None) -> float | None:
-        """``value`` if it lies in the range (``None`` passes: an unset optional option); else :class:`OptionError`."""
-        if value is None:
-            return None
-        number = float(value) if isinstance(value, float) or abs(value) < 1e300 else math.inf * (value > 0 or -1)
-        above = number > self.low if self.low_open else number >= self.low
-        if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
-            kind = "a whole number" if self.whole else "a finite number"
-            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {_number(number)}")
-        return value
-
-
-def _number(value: float) -> str:
-    """``2000``, ``4294967295``, ``0.5``, ``nan``: whole numbers written out, others as ``:g`` writes them."""
-    value = float(value)
-    return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else f"{value:g}"
-
-
 PUSH_N = Bounds(low=0, high=2000, unit="N")
 """Push magnitudes: up to four times the largest push of the paper's sweep (500 N)."""
 SEED = Bounds(low=0, high=2**32 - 1, whole=True)
@@ -117,8 +69,6 @@ MEASURE_SECONDS = Bounds(low=0, high=3600, unit="s", low_open=True)
 """Wall-clock time of a speed measurement, s."""
 WORKERS = Bounds(low=1, high=4096, whole=True)
 """Ray workers of one job (each a process with its own simulator)."""
-IMPULSE_NS = Bounds(low=0, high=200, unit="N s")
-"""Impulses of a single push (200 N s: 16 m/s of speed change for the A1, beyond anything it survives)."""
 LEGS = Bounds(low=1, high=5, whole=True)
 """Switches a route may take (``gaitlib routes --max-legs``)."""
 CHUNK = Bounds(low=1, high=1e7, whole=True)
@@ -251,36 +201,6 @@ def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ..
 def parse_magnitudes(text: str) -> tuple[float, ...]:
     """``--magnitudes``: push magnitudes, N, each in :data:`PUSH_N` (see :func:`parse_values`)."""
     return parse_values(text, option="--magnitudes", bounds=PUSH_N, example="0:500:50")
-
-
-def parse_values(text: str, *, option: str, bounds: Bounds, example: str) -> tuple[float, ...]:
-    """``START:STOP:STEP`` (STOP included) or a comma-separated list -> values, each in ``bounds``, at most
-    :data:`MAX_MAGNITUDES` of them (counted before any list is built)."""
-    try:
-        if ":" in text:
-            start, stop, step = (float(v) for v in text.split(":"))
-            for value in (start, stop):
-                bounds.check(option, value)
-            if not (math.isfinite(step) and step > 0 and stop >= start):
-                raise ValueError
-            span = (stop - start) / step  # STOP included: span + 1 values (a tolerance of float rounding)
-            count = MAX_MAGNITUDES + 1 if span >= MAX_MAGNITUDES else math.floor(span + 1e-9) + 1
-            values: tuple[float, ...] = ()
-            if count <= MAX_MAGNITUDES:
-                values = tuple(round(start + i * step, 6) for i in range(count))
-        else:
-            values = tuple(float(v) for v in text.split(",") if v.strip())
-            count = len(values)
-    except ValueError:
-        raise OptionError(f"{option} '{text}': give START:STOP:STEP (e.g. {example}) or a list") from None
-    if not 1 <= count <= MAX_MAGNITUDES:
-        raise OptionError(f"{option} '{text}': give 1 to {MAX_MAGNITUDES} values")
-    for value in values:
-        bounds.check(option, value)
-    values = tuple(v + 0.0 for v in values)  # -0 is 0
-    if len(set(values)) != len(values):
-        raise OptionError(f"{option} '{text}': a value is given twice")
-    return values
 
 
 def check_out_file(option: str, path: Path) -> Path:

@@ -20,12 +20,9 @@ from gaitlib.cli.options import (
     falls_option,
 )
 from gaitlib.cli.tables import print_measures
+from gaitlib.defaults import SWITCH_START
 
-__all__ = ["SWITCH_START", "eval_command", "train_command"]
-
-SWITCH_START = 0.4
-"""The share of training episodes that start from another gait's handover state when ``--states`` is given: most
-episodes still start from the gait's own reference, which teaches the gait itself (``docs/training.md``)."""
+__all__ = ["eval_command", "train_command"]
 
 
 def _description(gait: str, gait_file: Path | None):

@@ -1,6 +1,6 @@
 """The training recipe's robustness levers, one place: how a gait is pushed, what ends its episodes, what its leg
 touches cost, its discount and its action delay. The defaults are the shipped library's recipe (the robust recipe the
-ablation in docs/results.md chose); :data:`PAPER_RECIPE` is the one of the libraries before it. Each lever is an
+ablation in docs/ablation.md chose); :data:`PAPER_RECIPE` is the one of the libraries before it. Each lever is an
 option of ``gaitlib train`` and is recorded in the entry's metadata (``training.recipe``).
 
 The field's practice each lever follows:

@@ -1,7 +1,7 @@
 """Plot single-push curves of several gaits (or libraries) on one figure, from ``gaitlib eval GAIT --impulses ...
 --json`` outputs: fall rate against impulse with 95% intervals, one line per file (labelled by the file's name).
 
-Usage: python benchmarks/plot_push_curves.py OUT.png CURVE.json [CURVE.json ...]
+Usage: python -m benchmarks.results.plot_push_curves OUT.png CURVE.json [CURVE.json ...]
 """
 
 from __future__ import annotations

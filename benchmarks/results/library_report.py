@@ -1,6 +1,6 @@
 """Print the shipped library's training records as markdown: time, samples, evaluation, reward vs wall-clock.
 
-    python benchmarks/library_report.py [--library library]
+    python -m benchmarks.results.library_report [--library library]
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
-"""What the tables of docs/results.md share: where the stored evidence is, how a file of it is read and cited, how
-a rate, an interval, a pair and a benchmark's settings are written, and how a benchmark's counts are pooled
-(``benchmarks/results_tables.py``, ``benchmarks/robustness_tables.py``, ``benchmarks/switch_tables.py`` and
-``benchmarks/sweep_tables.py`` make the tables)."""
+"""What the results pages' tables share: where the stored evidence is, how a file of it is read and cited, how a
+rate, an interval, a pair and a benchmark's settings are written, and how a benchmark's counts are pooled (the other
+modules of :mod:`benchmarks.results` make the tables)."""
 
 from __future__ import annotations
 
@@ -10,16 +9,17 @@ from collections.abc import Iterable
 from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
+from gaitlib.defaults import BAR_FALLS, BAR_HEADING_DEG, BAR_SPEED, COMPARED
 from gaitlib.stats import wilson_interval
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "STRATEGIES",
-    "SWITCH_START", "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "SWITCH_START",
+    "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
     "pooled_success", "reached", "reaches", "read_evidence", "settings_line", "shown", "speed_heading_misses",
     "success",
 ]
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 """The repository."""
 EVIDENCE = ROOT / "docs" / "results" / "library"
 """The stored raw results of the shipped library (the robust recipe's)."""
@@ -27,14 +27,10 @@ SWITCH_START = ROOT / "docs" / "results" / "switch-start"
 """The stored raw results of the library shipped before it, ``library-switch-start/`` (the paper's recipe with
 switch-start training), named as the shipped library's are."""
 GAITS = ("trot", "pace", "stand", "walk", "bound", "pronk")
-"""The shipped gaits, in the order the tables list them."""
-BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
-"""The quality bar: falls in at most 1% of episodes, speed within 10% of the reference, median heading change at
-most 15 degrees."""
+"""The shipped library's gaits in the order its README names them (``library/README.md``), the tables' row order:
+a presentation order, not gaitlib's (gaitlib orders gaits by name, :func:`gaitlib.library.gait_order`)."""
 SPEED_BAR, HEADING_BAR = f"speed within {BAR_SPEED:.0%}", f"heading within {BAR_HEADING_DEG:g} deg"
 """The quality bar's speed and heading bars as the tables name them."""
-STRATEGIES = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
-"""Column order of the strategies in a switching table."""
 
 
 def read_evidence(path: Path) -> dict | None:
@@ -103,9 +99,10 @@ def arrow(pair: str) -> str:
 
 
 def groups_at(result: dict, magnitude: float) -> dict[str, dict]:
-    """strategy -> its cells (pair -> counts) at ``magnitude`` N, strategies in :data:`STRATEGIES` order."""
+    """strategy -> its cells (pair -> counts) at ``magnitude`` N, strategies in the order ``gaitlib benchmark`` compares
+them (:data:`gaitlib.defaults.COMPARED`), any other after them by name."""
     groups = {g["strategy"]: g["cells"] for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude}
-    order = {s: i for i, s in enumerate(STRATEGIES)}
+    order = {s: i for i, s in enumerate(COMPARED)}
     return dict(sorted(groups.items(), key=lambda item: (order.get(item[0], len(order)), item[0])))
 
 

@@ -1,6 +1,6 @@
-"""The robustness tables of docs/results.md: the gaits themselves against the robust recipe's goals
-(``benchmarks/switch_tables.py`` tables the switches). ``benchmarks/results_tables.py`` writes them into the doc with
-the others.
+"""The robustness tables: the gaits themselves against the robust recipe's goals
+(:mod:`benchmarks.results.switches` tables the switches). :mod:`benchmarks.results.doc` writes them into
+``docs/ablation.md`` (``robustness-gaits``, ``robust-library``) and ``docs/results.md`` (``shove-curves``).
 
 - ``robustness-gaits``: the robust recipe's ablation, ``docs/results/ablation/GAIT-VARIANT.json`` for each gait of
   :data:`ABLATION_GAITS` (``GAIT-today.json``: the switch-start library's gait, today's recipe: the recipe before
@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from evidence import (
+from benchmarks.results.evidence import (
     BAR_HEADING_DEG,
     BAR_SPEED,
     GAITS,
@@ -46,7 +46,7 @@ trained."""
 ABLATION_GAITS = ("pace", "trot")
 """The gaits of the ablation's baseline, in the table's order."""
 CHOSEN = "gamma-kick-trunk-touch5"
-"""The variant the ablation chose (docs/results.md, "How the rebuild's recipe is chosen"), the recipe of the
+"""The variant the ablation chose (docs/ablation.md, "Decision"), the recipe of the
 shipped library: each gait's row of it is ``GAIT-gamma-kick-trunk-touch5.json``."""
 LIBRARIES = (("today", "switch-start"), (CHOSEN, "robust"))
 """Each library's variant of the ablation rows and its name in the tables: the library shipped before

@@ -1,6 +1,6 @@
 """The paper's Fig. 4 in docs/results.md: every strategy on every pair under pushes from 0 to 500 N (its top), and
 without pushes on another A1 (its bottom, the real robot there), the library shipped before (switch-start) beside
-the shipped one (robust). ``benchmarks/results_tables.py`` writes them into the doc with the others.
+the shipped one (robust). :mod:`benchmarks.results.doc` writes them into the page with the others.
 
 Each block is made from one evidence file in ``docs/results/switch-start/`` and in ``docs/results/library/`` (like
 ``bench-0n.json``, one benchmark over every strategy and magnitude): ``sweep`` from ``sweep.json``,
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from evidence import (
+from benchmarks.results.evidence import (
     EVIDENCE,
     SWITCH_START,
     arrow,

@@ -1,6 +1,6 @@
-"""The switching tables of docs/results.md beyond 0 N: the shipped library's switches beside those of the library
-shipped before it, and where the shipped library's switches fail. ``benchmarks/results_tables.py`` writes them into
-the doc with the others.
+"""The switching tables beyond 0 N: the shipped library's switches beside those of the library shipped before it
+(``docs/results.md``), and where the shipped library's switches fail (``docs/switching_results.md``).
+:mod:`benchmarks.results.doc` writes them into the pages with the others.
 
 - ``switches``: every pair in both libraries, the switch-start library's evidence (``docs/results/switch-start/``)
   beside the shipped robust library's (``docs/results/library/``, the same files made with ``--library
@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import NamedTuple
 
-from evidence import (
+from benchmarks.results.evidence import (
     EVIDENCE,
     SWITCH_START,
     arrow,

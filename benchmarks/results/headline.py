@@ -1,32 +1,22 @@
-"""Make the headline tables of docs/results.md from the raw results stored beside it, and write them into the doc.
+"""The tables of each gait against the quality bar (``quality-bar``) and the transition-net's accuracy beside the
+paper's Table 3 (``net-accuracy``) in docs/results.md, and of every pair at 0 N (``pairs-0n``), the routes of both
+libraries (``routes``, ``routes-switch-start``) and the switch-start library's net (``net-accuracy-switch-start``) in
+docs/switching_results.md.
 
-    python benchmarks/results_tables.py            # rewrite the generated blocks of docs/results.md
-    python benchmarks/results_tables.py --check    # exit 1 naming the first table that differs from its evidence
-
-Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` (NAME: one of :data:`TABLES`; the gaits'
-robustness tables are made in ``benchmarks/robustness_tables.py``, the switches of both libraries under pushes and on
-another A1 and the transition map in ``benchmarks/switch_tables.py``, the paper's Fig. 4 (every strategy) in
-``benchmarks/sweep_tables.py``, what they share is ``benchmarks/evidence.py``). Everything between the two is made here
-from the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the doc,
-makes ``--check`` fail (tests/test_results_doc.py runs it). The evidence: ``docs/results/library/*.json``, each
-``{"command": the exact command that made it, "made": "YYYY-MM-DD", "result": its raw output}``, those of the library
-shipped before it beside them (``docs/results/switch-start/``), the robust recipe's ablation rows
-(``docs/results/ablation/``), and each library's own ``switching/accuracy.json``. A table whose evidence is not stored
-yet says "not yet measured".
+Each is made from the evidence in ``docs/results/library/`` (``eval-GAIT.json``, ``bench-0n.json``,
+``bench-direct.json``, ``bench-routed.json``, ``routes.json``; the switch-start library's of the same names in
+``docs/results/switch-start/``) and each library's own ``switching/accuracy.json``. A table whose evidence is not
+stored yet says "not yet measured".
 """
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
-import re
-import sys
-import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
-from evidence import (
+from benchmarks.results.evidence import (
     BAR_FALLS,
     EVIDENCE,
     GAITS,
@@ -45,40 +35,25 @@ from evidence import (
     speed_heading_misses,
     success,
 )
-from robustness_tables import library_table, robustness_table, shove_table
-from sweep_tables import HELD_OUT, sweep_table
-from switch_tables import SWITCH_GOALS, map_table, switches_table
-
-from gaitlib.atomic import atomic_path
+from benchmarks.results.switches import SWITCH_GOALS
+from gaitlib.strategies.fitting import PAPER_PAIRS
 
 __all__ = [
-    "ACCURACY", "DOC", "EVIDENCE", "SWITCH_START_ACCURACY", "TABLES", "accuracy_table", "check_doc", "fill",
-    "first_difference", "main", "pairs_table", "quality_bar", "read_evidence", "render_tables", "routes_table",
-    "write_doc",
+    "ACCURACY", "GOAL", "INPUTS", "ROBUST_GOAL", "SWITCH_START_ACCURACY", "accuracy_table", "pairs_table",
+    "quality_bar", "routes_table",
 ]
 
-DOC = ROOT / "docs" / "results.md"
-"""The doc whose generated blocks these tables are."""
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
 SWITCH_START_ACCURACY = ROOT / "library-switch-start" / "switching" / "accuracy.json"
 """The accuracy report of the transition-net of the library shipped before (switch-start)."""
-TABLES = ("quality-bar", "robustness-gaits", "robust-library", "shove-curves", "pairs-0n", "routes",
-          "routes-switch-start", "switches", "map", "sweep", "strategies-menagerie", "net-accuracy",
-          "net-accuracy-switch-start")
-"""The generated blocks, in the doc's order."""
 GOAL = 0.99
 """The success a switch is counted against (the switch-start library's routes)."""
 ROBUST_GOAL = next(g.goal for g in SWITCH_GOALS if (g.name, g.strategy) == ("bench-0n", "net-lookahead"))
 """The robust recipe's goal for a switch at 0 N with ``net-lookahead``, which the shipped library's routes are counted
 against."""
-PAPER_PAIRS = ("stand-pace", "stand-trot", "pace-trot", "pace-stand", "trot-pace", "trot-stand")
-"""The paper's six pairs, in its Table 3 column order."""
 INPUTS = ("latent", "explicit", "phase")
 """The transition-net's input kinds, in the order of the paper's claim (latent >= explicit > phase)."""
-BLOCK = re.compile(r"<!-- table: ([a-z0-9-]+) -->\n(.*?)<!-- /table -->", re.S)
-WIDTH = 120
-"""The doc's line length: the tables' prose is wrapped to it (a table row or an inline code span is never broken)."""
 
 
 def _speed(value: float) -> str:
@@ -273,111 +248,3 @@ def accuracy_table(path: Path = ACCURACY) -> str:
              f"samples, {labels}."]
     return "\n".join([*lines, "", " ".join(n for n in notes if n), "",
                       f"Evidence: `{shown(path)}`, written by `{command}` (the data and inputs the file records)."])
-
-
-def _fill(text: str) -> str:
-    """One paragraph or list item wrapped at :data:`WIDTH`, its inline code spans whole."""
-    kept = re.sub(r"`[^`]*`", lambda match: match.group(0).replace(" ", "\0"), " ".join(text.split("\n")))
-    lines = textwrap.wrap(kept, WIDTH, subsequent_indent="  " if text.startswith("- ") else "",
-                          break_long_words=False, break_on_hyphens=False)
-    return "\n".join(lines).replace("\0", " ")
-
-
-def _wrap(body: str) -> str:
-    """``body`` with its prose wrapped (:func:`_fill`) and its tables as they are."""
-    return "\n\n".join(p if p.startswith("|") else "\n".join(_fill(item) for item in re.split(r"\n(?=- )", p))
-                       for p in body.split("\n\n"))
-
-
-def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
-                  switch_start_accuracy: Path = SWITCH_START_ACCURACY) -> dict[str, str]:
-    """Every generated block's content, by name, in :data:`TABLES` order; the ablation rows are read from the folder
-    ``ablation`` beside ``evidence_dir``, the switch-start library's evidence from ``switch-start`` beside it."""
-    ablation, earlier = Path(evidence_dir).parent / "ablation", Path(evidence_dir).parent / "switch-start"
-    tables = {"quality-bar": quality_bar(evidence_dir), "robustness-gaits": robustness_table(ablation),
-              "robust-library": library_table(ablation), "shove-curves": shove_table(ablation),
-              "pairs-0n": pairs_table(evidence_dir), "routes": routes_table(evidence_dir, goal=ROBUST_GOAL),
-              "routes-switch-start": routes_table(earlier), "switches": switches_table(earlier, evidence_dir),
-              "map": map_table(evidence_dir), "sweep": sweep_table(earlier, evidence_dir),
-              "strategies-menagerie": sweep_table(earlier, evidence_dir, name=HELD_OUT),
-              "net-accuracy": accuracy_table(accuracy),
-              "net-accuracy-switch-start": accuracy_table(switch_start_accuracy)}
-    return {name: _wrap(body) for name, body in tables.items()}
-
-
-def _block(name: str, body: str) -> str:
-    return f"<!-- table: {name} -->\n\n{body}\n\n<!-- /table -->"
-
-
-def _blocks(text: str) -> dict[str, str]:
-    """name -> the whole block as the doc holds it (markers included); one-line errors for an unknown or repeated
-    name."""
-    blocks: dict[str, str] = {}
-    for match in BLOCK.finditer(text):
-        name = match.group(1)
-        if name not in TABLES or name in blocks:
-            raise ValueError(f"the table marker '{name}' is {'repeated' if name in blocks else 'unknown'}")
-        blocks[name] = match.group(0)
-    return blocks
-
-
-def first_difference(text: str, tables: dict[str, str]) -> str | None:
-    """The first table (in the doc's order, then any the doc lacks) whose block differs from ``tables``."""
-    blocks = _blocks(text)
-    for name in [*blocks, *(n for n in tables if n not in blocks)]:
-        if blocks.get(name) != _block(name, tables[name]):
-            return name
-    return None
-
-
-def fill(text: str, tables: dict[str, str]) -> str:
-    """``text`` with every generated block made from ``tables`` (each table's markers must be there)."""
-    absent = [name for name in tables if name not in _blocks(text)]
-    if absent:
-        raise ValueError(f"no <!-- table: {absent[0]} --> ... <!-- /table --> block to write the table into")
-    return BLOCK.sub(lambda match: _block(match.group(1), tables[match.group(1)]), text)
-
-
-def check_doc(doc: Path = DOC, evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> str | None:
-    """The first table of ``doc`` that differs from what its evidence makes, or ``None`` when all agree."""
-    return first_difference(Path(doc).read_text(encoding="utf-8"), render_tables(evidence_dir, accuracy))
-
-
-def write_doc(doc: Path = DOC, evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY) -> bool:
-    """Rewrite ``doc``'s generated blocks from the evidence (a temporary file beside it, then renamed over it);
-    whether anything changed."""
-    doc = Path(doc)
-    text = doc.read_text(encoding="utf-8")
-    filled = fill(text, render_tables(evidence_dir, accuracy))
-    if filled == text:
-        return False
-    with atomic_path(doc) as tmp:
-        tmp.write_text(filled, encoding="utf-8")
-    return True
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="change nothing; exit 1 if a table differs")
-    parser.add_argument("--doc", type=Path, default=DOC, help="the doc (default: docs/results.md)")
-    parser.add_argument("--evidence", type=Path, default=EVIDENCE, help="the stored results (docs/results/library)")
-    parser.add_argument("--accuracy", type=Path, default=ACCURACY, help="the accuracy report (the shipped library's)")
-    args = parser.parse_args(argv)
-    try:
-        name = check_doc(args.doc, args.evidence, args.accuracy) if args.check else None
-        changed = False if args.check else write_doc(args.doc, args.evidence, args.accuracy)
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        detail = f"a stored result has no {error}" if isinstance(error, KeyError) else str(error)
-        print(f"results_tables: {detail}", file=sys.stderr)
-        return 2
-    if name is not None:
-        print(f"{shown(args.doc)}: the table '{name}' differs from what its stored evidence makes (or has no block); "
-              "python benchmarks/results_tables.py rewrites it", file=sys.stderr)
-        return 1
-    state = "every table agrees with its stored evidence" if args.check else "rewritten" if changed else "up to date"
-    print(f"{shown(args.doc)}: {state}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

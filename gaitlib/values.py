@@ -1,0 +1,91 @@
+"""Ranges of numeric values and the parsing of value lists (``START:STOP:STEP`` or ``a,b,c``), shared by the
+command line (:mod:`gaitlib.cli.options` declares its options with them) and the scripts that take the same values:
+a value out of range is refused in one line naming the option, before any work starts."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from gaitlib.errors import GaitlibError
+
+__all__ = ["IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "parse_values"]
+
+MAX_MAGNITUDES = 1000
+"""Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
+
+
+class OptionError(GaitlibError):
+    """An option value the command does not accept (exit code 2, like other usage errors)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Bounds:
+    """The values a numeric option accepts."""
+
+    low: float
+    """Smallest value (excluded when ``low_open``), in ``unit``."""
+    high: float
+    """Largest value, in ``unit``."""
+    unit: str = ""
+    """Unit of the value (SI, or min for training time; empty for counts)."""
+    whole: bool = False
+    """Only whole numbers (counts, seeds)."""
+    low_open: bool = False
+    """``low`` itself is refused (durations that must be positive)."""
+
+    def describe(self) -> str:
+        """The range as the help and the errors write it, e.g. ``[0, 2000] N`` or ``(0, 600] s``."""
+        text = f"{'(' if self.low_open else '['}{_number(self.low)}, {_number(self.high)}]"
+        return f"{text} {self.unit}" if self.unit else text
+
+    def check(self, option: str, value: float | None) -> float | None:
+        """``value`` if it lies in the range (``None`` passes: an unset optional option); else :class:`OptionError`."""
+        if value is None:
+            return None
+        number = float(value) if isinstance(value, float) or abs(value) < 1e300 else math.inf * (value > 0 or -1)
+        above = number > self.low if self.low_open else number >= self.low
+        if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
+            kind = "a whole number" if self.whole else "a finite number"
+            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {_number(number)}")
+        return value
+
+
+def _number(value: float) -> str:
+    """``2000``, ``4294967295``, ``0.5``, ``nan``: whole numbers written out, others as ``:g`` writes them."""
+    value = float(value)
+    return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+
+
+IMPULSE_NS = Bounds(low=0, high=200, unit="N s")
+"""Impulses of a single push (200 N s: 16 m/s of speed change for the A1, beyond anything it survives)."""
+
+
+def parse_values(text: str, *, option: str, bounds: Bounds, example: str) -> tuple[float, ...]:
+    """``START:STOP:STEP`` (STOP included) or a comma-separated list -> values, each in ``bounds``, at most
+    :data:`MAX_MAGNITUDES` of them (counted before any list is built)."""
+    try:
+        if ":" in text:
+            start, stop, step = (float(v) for v in text.split(":"))
+            for value in (start, stop):
+                bounds.check(option, value)
+            if not (math.isfinite(step) and step > 0 and stop >= start):
+                raise ValueError
+            span = (stop - start) / step  # STOP included: span + 1 values (a tolerance of float rounding)
+            count = MAX_MAGNITUDES + 1 if span >= MAX_MAGNITUDES else math.floor(span + 1e-9) + 1
+            values: tuple[float, ...] = ()
+            if count <= MAX_MAGNITUDES:
+                values = tuple(round(start + i * step, 6) for i in range(count))
+        else:
+            values = tuple(float(v) for v in text.split(",") if v.strip())
+            count = len(values)
+    except ValueError:
+        raise OptionError(f"{option} '{text}': give START:STOP:STEP (e.g. {example}) or a list") from None
+    if not 1 <= count <= MAX_MAGNITUDES:
+        raise OptionError(f"{option} '{text}': give 1 to {MAX_MAGNITUDES} values")
+    for value in values:
+        bounds.check(option, value)
+    values = tuple(v + 0.0 for v in values)  # -0 is 0
+    if len(set(values)) != len(values):
+        raise OptionError(f"{option} '{text}': a value is given twice")
+    return values
