@@ -13,8 +13,8 @@ from gaitlib.defaults import BAR_FALLS, BAR_HEADING_DEG, BAR_SPEED, COMPARED
 from gaitlib.stats import wilson_interval
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR", "SWITCH_START",
-    "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "EVIDENCE", "GAITS", "HEADING_BAR", "ROOT", "SPEED_BAR",
+    "SWITCH_START", "arrow", "cite", "groups_at", "interval", "libraries_line", "not_yet", "pct", "pooled",
     "pooled_success", "reached", "reaches", "read_evidence", "settings_line", "shown", "speed_heading_misses",
     "success",
 ]
