@@ -25,10 +25,10 @@ from tensordict import TensorDict
 from gaitlib.atomic import CHECKSUM_KEY, json_checksum
 from gaitlib.benchmark.report import cell_results
 from gaitlib.benchmark.results import load_results, open_results
-from gaitlib.benchmark.routes import load_routes
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
+from gaitlib.strategies.routes import load_routes
 from gaitlib.training.switch_start import handover_states
 
 __all__ = ["GENERIC", "EditTarget", "edit", "edit_targets"]

@@ -13,11 +13,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gaitlib.benchmark.routes import load_routes
 from gaitlib.defaults import DEFAULT_STRATEGY
 from gaitlib.meta import load_switching
 from gaitlib.meta.episode import run_episode
 from gaitlib.meta.trace_plot import plot_trace
+from gaitlib.strategies.routes import load_routes
 
 
 def main() -> None:

@@ -11,13 +11,13 @@ import torch
 from cli_runner import gaitlib_quick
 from conftest import copy_library
 
-from gaitlib.benchmark.routes import ROUTES_FILE, RouteTable, load_routes
 from gaitlib.benchmark.sweep import CellSchedule, SweepConfig, run_sweep
 from gaitlib.envs import EnvConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.library.store import Library
 from gaitlib.meta import SwitchTrials, TrialOutcome, TrialProtocol, load_switching
 from gaitlib.sim import make_backend
+from gaitlib.strategies.routes import ROUTES_FILE, RouteTable, load_routes
 
 GAITS = ("pace", "stand", "trot")
 

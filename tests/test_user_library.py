@@ -16,9 +16,9 @@ import pytest
 from cli_runner import gaitlib_quick
 from conftest import copy_library
 
-from gaitlib.benchmark.routes import load_routes
 from gaitlib.library import Library, library_status
 from gaitlib.library.layout import ordered_pairs, shipped_library_dir
+from gaitlib.strategies.routes import load_routes
 from gaitlib.training.recipe import Recipe
 
 REPO = Path(__file__).resolve().parents[1]

@@ -16,11 +16,11 @@ from conftest import copy_library, write_foreign_json
 
 from gaitlib.atomic import write_json
 from gaitlib.benchmark.results import load_results
-from gaitlib.benchmark.routes import ROUTES_FILE, load_routes
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
 from gaitlib.library import Library, library_status
 from gaitlib.library.store import LibraryError
+from gaitlib.strategies.routes import ROUTES_FILE, load_routes
 from gaitlib.transitions.states import StatesConfig, record_states
 
 

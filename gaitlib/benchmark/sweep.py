@@ -96,7 +96,7 @@ class SweepConfig:
     either way."""
     routes: dict[str, tuple[str, ...]] = field(default_factory=dict)
     """``"m-n"`` -> the gaits (m, ..., n) a transition of that pair switches through, each switch with the group's
-    strategy, one after the other on the same robot (:mod:`gaitlib.benchmark.routes`); the other pairs switch
+    strategy, one after the other on the same robot (:mod:`gaitlib.strategies.routes`); the other pairs switch
     directly."""
 
     def __post_init__(self) -> None:

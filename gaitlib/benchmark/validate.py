@@ -1,5 +1,5 @@
-"""Validation by schema of the benchmark's files: a sweep's ``OUT/results.json`` (:func:`check_results`) and a
-library's route table, ``switching/routes.json`` (:func:`check_routes`).
+"""Validation by schema of the benchmark's results, a sweep's ``OUT/results.json`` (:func:`check_results`); a library's
+route table is checked where it is read (:func:`gaitlib.strategies.routes.check_routes`).
 
 Beyond types and ranges, the counts must agree with one another (successes, touches and switches within the
 transitions counted, every cell of the sweep's number of samples, a touch counted where a longest touch is), every
@@ -28,9 +28,8 @@ from gaitlib.checks import (
 )
 from gaitlib.defaults import FALL_DEFINITIONS
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import ordered_pairs
 
-__all__ = ["BACKENDS", "SWITCH_STEP_S", "check_results", "check_routes"]
+__all__ = ["BACKENDS", "SWITCH_STEP_S", "check_results"]
 
 BACKENDS = ("mujoco", "newton")
 """Backends a group may have run on (``auto`` is resolved before a group runs)."""
@@ -48,51 +47,6 @@ _SECONDS = number(0, 600, unit="s")
 _PAIR = text(pattern="[^-, ]+-[^-, ]+", what="a pair of gaits 'm-n'")
 _PROTOCOL = {"warmup_s": _SECONDS, "source_extra_s": _SECONDS, "horizon_s": number(0, 600, low_open=True, unit="s"),
              "deadline_s": _SECONDS}
-
-
-def _refuse(path: Path, field: str, problem: str, suffix: str = "") -> GaitlibError:
-    return GaitlibError(f"{path} is damaged: {field} {problem}{suffix}")
-
-
-def check_routes(saved: Mapping, *, path: Path, strategies: Sequence[str], again: str = "") -> None:
-    """Refuse, in one line ending with ``again``, a route table (as :func:`~gaitlib.atomic.read_json` returns it)
-    that is not of the format: types and ranges, a rate of more successes than transitions or of other transitions
-    than it was measured with, pairs not of its gaits, an unknown strategy."""
-    schema = record(
-        {
-            "format": text(), "format_version": number(whole=True),
-            "gaits": items(GAIT_NAME, low=2, unique=True, ordered=True),
-            "strategy": text(tuple(strategies)),
-            "push_n": _PUSH_N,
-            "max_legs": number(1, 5, whole=True),
-            "rates": table(_PAIR, items(_COUNT, length=2), low=2),
-            "policies": table(GAIT_NAME, SHA256, low=2),
-            "switching": SHA256,
-            "measured_with": record({"samples": _SAMPLES, "seed": _SEED, "num_worlds": _WORLDS, **_PROTOCOL,
-                                     "falls": text(FALL_DEFINITIONS)}),
-        },
-        {"detours": table(_PAIR, items(GAIT_NAME, low=3))},
-    )
-    check_content(saved, schema, error=GaitlibError, prefix=f"{path} is damaged: ", suffix=again)
-    gaits, rates, measured = saved["gaits"], saved["rates"], saved["measured_with"]
-    pairs = ordered_pairs(gaits)
-    for pair in rates:
-        if pair not in pairs:
-            raise _refuse(path, f"rates.{pair}", f"is not a pair of the table's gaits ({', '.join(gaits)})", again)
-    for pair in pairs:
-        if pair not in rates:
-            raise _refuse(path, "rates", f"lacks the pair {pair}", again)
-        successes, transitions = rates[pair]
-        if transitions != measured["samples"]:
-            raise _refuse(path, f"rates.{pair}", f"counts {transitions} transitions, measured_with.samples "
-                          f"{measured['samples']}", again)
-        if successes > transitions:
-            raise _refuse(path, f"rates.{pair}", f"counts {successes} successes of {transitions} transitions", again)
-    if set(saved["policies"]) != set(gaits):
-        raise _refuse(path, "policies", f"name {', '.join(sorted(saved['policies']))}, the table's gaits are "
-                      f"{', '.join(gaits)}", again)
-    if measured["horizon_s"] < measured["deadline_s"]:
-        raise _refuse(path, "measured_with.horizon_s", "is shorter than the deadline", again)
 
 
 def _settings(strategies: Sequence[str]) -> Callable[[object, str], None]:

@@ -84,8 +84,8 @@ def library_command(
 def _routes(lib, status) -> dict | None:
     """The library's route table (``gaitlib routes``): ``None`` without one, else its state, and its detours when
     it is current."""
-    from gaitlib.benchmark.routes import ROUTES_FILE, load_routes
     from gaitlib.errors import GaitlibError
+    from gaitlib.strategies.routes import ROUTES_FILE, load_routes
 
     if status.bundle is None or not (lib.switching_dir / ROUTES_FILE).is_file():
         return None

@@ -319,7 +319,7 @@ def _route_table(setup, *, strategies, pushes, falls: str):
     what this command runs (another strategy, push or definition of a fall)."""
     from rich.console import Console
 
-    from gaitlib.benchmark.routes import load_routes
+    from gaitlib.strategies.routes import load_routes
 
     table = load_routes(setup.resources.library, setup.gaits)
     measured = table.measured_with.get("falls", "contact")
