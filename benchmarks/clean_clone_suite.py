@@ -1,0 +1,75 @@
+"""The test suite as CI runs it: ``git clone`` of a commit into a fresh folder, then ``CI=true bash .ci/run`` there
+(its venv, its install, the whole suite), timed. Prints one JSON line, the row of ``docs/benchmarks.md``'s "The test
+suite": the commit, pytest's summary, and the time of the install, the tests and the whole run, s.
+
+    python benchmarks/clean_clone_suite.py [--repo .] [--commit main] [--out suite.json]
+
+Run it with nothing else on the cores. "tests" is the time pytest reports on its last line; "install" the rest of the
+run (the venv, ``pip install``, pytest's start).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["SUMMARY", "clean_clone_run", "main"]
+
+SUMMARY = re.compile(r"(\d+ (?:passed|failed|error).*?) in ([0-9.]+)s")
+"""pytest's last line, e.g. ``==== 445 passed, 3 skipped in 203.12s (0:03:23) ====``: the counts and the tests'
+time, s."""
+
+
+def _git(*args: str) -> str:
+    done = subprocess.run(["git", *args], capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"clean_clone_suite: git {' '.join(args)}: {done.stderr.strip().splitlines()[-1]}")
+    return done.stdout.strip()
+
+
+def clean_clone_run(repo: Path, commit: str) -> dict:
+    """``repo`` at ``commit`` cloned into a temporary folder and ``CI=true bash .ci/run`` run there: the commit, the
+    exit code, pytest's summary and the install's, the tests' and the whole run's time, s."""
+    known = subprocess.run(["git", "-C", str(repo), "rev-parse", "--verify", "--quiet", "--short",
+                            f"{commit}^{{commit}}"], capture_output=True, text=True, check=False)
+    if known.returncode != 0:
+        raise SystemExit(f"clean_clone_suite: {repo} has no commit '{commit}'")
+    sha = known.stdout.strip()
+    with tempfile.TemporaryDirectory(prefix="clean-clone-") as folder:
+        clone = Path(folder) / "clone"
+        _git("clone", "--quiet", "--no-checkout", str(Path(repo).resolve()), str(clone))
+        _git("-C", str(clone), "checkout", "--quiet", sha)
+        start = time.perf_counter()
+        done = subprocess.run(["bash", ".ci/run"], cwd=clone, env=os.environ | {"CI": "true"}, capture_output=True,
+                              text=True, check=False)
+        total = time.perf_counter() - start
+    found = [m for line in done.stdout.splitlines() if (m := SUMMARY.search(line))]
+    summary, tests = (found[-1].group(1), float(found[-1].group(2))) if found else (None, None)
+    return {"commit": sha, "returncode": done.returncode, "summary": summary, "install_s": None if tests is None
+            else round(total - tests, 1), "tests_s": tests, "total_s": round(total, 1)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repo", type=Path, default=Path(__file__).resolve().parents[1], help="the repository")
+    parser.add_argument("--commit", default="main", help="the commit to clone (default: main)")
+    parser.add_argument("--out", type=Path, default=None, help="also write the run here as JSON")
+    args = parser.parse_args()
+    run = clean_clone_run(args.repo, args.commit)
+    print(json.dumps(run))
+    if args.out is not None:
+        from gaitlib.atomic import write_json
+
+        write_json(args.out, run, indent=1)
+    sys.exit(0 if run["returncode"] == 0 else 1)
+
+
+if __name__ == "__main__":
+    main()
