@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,9 @@ import pytest
 from gaitlib.atomic import CHECKSUM_KEY, json_checksum
 from gaitlib.library import Library
 from gaitlib.sim import make_backend
+
+REPO = Path(__file__).resolve().parents[1]
+"""The repository the tests run in."""
 
 TINY_GAITS = ("stand", "trot")
 """The gaits of :func:`tiny_library`."""
@@ -125,3 +129,25 @@ def switching_library(tiny_library, tmp_path_factory) -> Path:
     collect(data_path, library=library, config=config)
     fit_library(library, read(data_path), sources=[data_path], epochs=2)
     return library.root
+
+
+def git(*args: str, cwd: Path) -> str:
+    """``git ARGS`` in ``cwd``, as a test user; its stdout."""
+    command = ["git", "-c", "user.name=test", "-c", "user.email=test@example.org", *args]
+    return subprocess.run(command, cwd=cwd, check=True, capture_output=True, text=True).stdout
+
+
+@pytest.fixture
+def fresh_copy(tmp_path) -> Path:
+    """The repository's files as a fresh clone would hold them (this working tree's, committed in a new git repo)."""
+    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=REPO, check=True,
+                            capture_output=True, text=True).stdout.split()
+    copy = tmp_path / "gaitlib"
+    for name in listed:
+        if (REPO / name).is_file():
+            (copy / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / name, copy / name)
+    git("init", "-q", cwd=copy)
+    git("add", "-A", cwd=copy)
+    git("commit", "-q", "-m", "fresh", cwd=copy)
+    return copy

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from cli_runner import gaitlib_quick
-from conftest import copy_library
+from conftest import copy_library, git
 
 from gaitlib.library import Library, library_status
 from gaitlib.library.layout import ordered_pairs, shipped_library_dir
@@ -32,11 +32,6 @@ def run(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedP
     )
 
 
-def git(*args: str, cwd: Path) -> str:
-    command = ["git", "-c", "user.name=test", "-c", "user.email=test@example.org", *args]
-    return subprocess.run(command, cwd=cwd, check=True, capture_output=True, text=True).stdout
-
-
 def run_fix(commands: list[str], library: Path) -> None:
     """Run the collect and fit commands ``gaitlib library`` printed, as printed but for the collection's 8 worlds
     instead of 256 (a choice of the machine, not of the samples), and check that nothing is left to fix."""
@@ -47,22 +42,6 @@ def run_fix(commands: list[str], library: Path) -> None:
     assert fitted.returncode == 0, fitted.stderr
     after = json.loads(gaitlib_quick("library", "--library", str(library), "--json").stdout)
     assert after["problems"] == [] and {v["state"] for v in after["switching"]["pairs"].values()} == {"covered"}
-
-
-@pytest.fixture
-def fresh_copy(tmp_path) -> Path:
-    """The repository's files as a fresh clone would hold them (this working tree's, committed in a new git repo)."""
-    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=REPO, check=True,
-                            capture_output=True, text=True).stdout.split()
-    copy = tmp_path / "gaitlib"
-    for name in listed:
-        if (REPO / name).is_file():
-            (copy / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(REPO / name, copy / name)
-    git("init", "-q", cwd=copy)
-    git("add", "-A", cwd=copy)
-    git("commit", "-q", "-m", "fresh", cwd=copy)
-    return copy
 
 
 def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alone(fresh_copy) -> None:
