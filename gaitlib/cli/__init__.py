@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from importlib.metadata import version
 
 import typer
 
@@ -19,6 +20,24 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+def _print_version(show: bool) -> None:
+    """``--version``: one line, the version in gaitlib's package metadata, and exit."""
+    if show:
+        print(f"gaitlib {version('gaitlib')}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    _version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="Print gaitlib's version and exit."
+    ),
+) -> None:
+    """The options of ``gaitlib`` itself, given before a command (its help is the app's)."""
+
+
 app.command("train")(train.train_command)
 app.command("eval")(train.eval_command)
 app.command("library")(library.library_command)

@@ -11,6 +11,7 @@ from pathlib import Path
 from gaitlib.errors import TransitionDataError
 
 __all__ = [
+    "PACKAGED_LIBRARY",
     "check_identities",
     "default_library_dir",
     "first_fit",
@@ -21,9 +22,21 @@ __all__ = [
 ]
 
 
+PACKAGED_LIBRARY = "shipped"
+"""The folder of ``gaitlib/library/`` that holds the shipped library in a wheel (the build copies ``library/``
+there: ``setup.py``)."""
+
+
 def shipped_library_dir() -> Path:
-    """The library that ships with gaitlib: ``library/`` of the repository, beside the package."""
-    return Path(__file__).resolve().parents[2] / "library"
+    """The library that ships with gaitlib, by one rule: run from a source checkout (the folder holding the
+    ``gaitlib`` package also holds ``pyproject.toml``), the checkout's ``library/``; installed from a wheel (or by
+    ``pip install .``), the copy the build put inside the package, ``gaitlib/library/shipped/``
+    (:data:`PACKAGED_LIBRARY`)."""
+    here = Path(__file__).resolve().parent
+    checkout = here.parents[1]
+    if (checkout / "pyproject.toml").is_file():
+        return checkout / "library"
+    return here / PACKAGED_LIBRARY
 
 
 def default_library_dir() -> Path:
