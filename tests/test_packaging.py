@@ -16,6 +16,7 @@ from pathlib import Path
 from cli_runner import gaitlib_quick
 from conftest import REPO
 
+import gaitlib
 from gaitlib.library.layout import PACKAGED_LIBRARY
 
 LINT_IMPORTS = Path(sys.executable).parent / "lint-imports"
@@ -29,6 +30,13 @@ def lint_imports(root: Path) -> subprocess.CompletedProcess[str]:
         [str(LINT_IMPORTS), "--no-cache"],
         cwd=root, env=env, capture_output=True, text=True, timeout=120,
     )
+
+
+def succeeded(*command: str) -> str:
+    """Run ``command`` (nothing is downloaded: every pip call is ``--no-index``); its stdout, once it exited 0."""
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
 
 
 def test_every_import_points_down_the_layers() -> None:
@@ -52,7 +60,7 @@ def test_an_upward_import_breaks_the_layers_contract(tmp_path) -> None:
 def test_version_is_one_line_from_the_package_metadata() -> None:
     shown = gaitlib_quick("--version")
     assert shown.returncode == 0 and shown.stderr == ""
-    assert shown.stdout == f"gaitlib {version('gaitlib')}\n"
+    assert shown.stdout == f"gaitlib {version('gaitlib')}\n" and version("gaitlib") == gaitlib.__version__
 
 
 def test_the_wheel_carries_the_shipped_library_and_runs_the_main_job_outside_the_source_tree(
@@ -61,30 +69,24 @@ def test_the_wheel_carries_the_shipped_library_and_runs_the_main_job_outside_the
     """Build the wheel of a fresh clone, install it alone into a new venv that reaches the dependencies already
     installed here, and run the README's main job from an empty folder: it reads the library inside the package,
     which the protection of the shipped library knows as the shipped one."""
-    subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
-         "-w", str(tmp_path / "dist"), str(fresh_copy)],
-        check=True, capture_output=True, timeout=300,
-    )
+    succeeded(sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
+              "-w", str(tmp_path / "dist"), str(fresh_copy))
     (wheel,) = (tmp_path / "dist").glob("gaitlib-*.whl")
     packaged = f"gaitlib/library/{PACKAGED_LIBRARY}/"
     shipped = {p.relative_to(REPO / "library").as_posix(): p.read_bytes()
-               for p in (REPO / "library").rglob("*") if p.is_file()}
+               for p in (REPO / "library").rglob("*") if p.is_file() and not p.name.startswith(".")}
     with zipfile.ZipFile(wheel) as archive:
         carried = {n.removeprefix(packaged): archive.read(n) for n in archive.namelist() if n.startswith(packaged)}
     assert carried.keys() == shipped.keys() and carried == shipped  # every file of library/, byte for byte
 
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    succeeded(sys.executable, "-m", "venv", "--without-pip", str(venv))
     python = venv / "bin" / "python"
-    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                               check=True, capture_output=True, text=True).stdout.strip())
+    site = Path(succeeded(str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])").strip())
     here = dict.fromkeys([sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]])
     (site / "dependencies.pth").write_text("".join(f"{path}\n" for path in here))  # torch, mujoco, ... of this venv
-    subprocess.run(
-        [sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index", str(wheel)],
-        check=True, capture_output=True, timeout=300,
-    )
+    succeeded(sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index",
+              str(wheel))
 
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
