@@ -5,7 +5,7 @@ from __future__ import annotations
 
 __all__ = [
     "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "FALL_DEFINITIONS",
-    "SWITCH_START",
+    "MIN_PER_LABEL", "SWITCH_START",
 ]
 
 COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
@@ -26,3 +26,9 @@ episodes still start from the gait's own reference, which teaches the gait itsel
 BAR_FALLS, BAR_SPEED, BAR_HEADING_DEG = 0.01, 0.10, 15.0
 """The quality bar a gait is judged against (``docs/results.md``): falls in at most 1% of episodes, forward speed
 within 10% of the reference (a fraction), median heading change over an episode at most 15 degrees."""
+MIN_PER_LABEL = 25
+"""The fewest successful and the fewest failed switches each ordered pair of the data needs for a fit of the
+switching models to be written (``gaitlib fit --min-per-label``,
+:func:`gaitlib.strategies.fitting.check_validatable`): the validation set holds a fifth of each label's balanced
+samples (:class:`gaitlib.transition_net.FitConfig`), so at least 5 of each per pair, and a pair's accuracy rests on
+10 held-out switches or more. The shipped fit's rarest label of any pair has 445 samples."""

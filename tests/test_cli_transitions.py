@@ -47,7 +47,8 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
                           "--seed", "1", *QUICK)
     assert named.returncode == 0, named.stderr
     assert validate(more).header.gaits == ("stand", "trot")
-    fitted = gaitlib_quick("fit", "--data", data, "--data", more, "--epochs", "3", "--library", lib, "--json")
+    fitted = gaitlib_quick("fit", "--data", data, "--data", more, "--epochs", "3", "--library", lib, "--json",
+                           "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
     report = json.loads(fitted.stdout)
     assert set(report["balanced_validation_accuracy"]) == {"latent"} and report["samples"] == 48

@@ -39,7 +39,8 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     # Run first, before this process starts its own Ray: the command starts a local Ray for the run and stops it.
     # In this process, saving a fresh interpreter's imports (``collect`` runs in a fresh one in test_cli_transitions).
     lib, data = str(tiny_library.root), str(tmp_path / "ray.h5")
-    quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8"]
+    quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8",
+             "--seed", "0"]  # the same seed for both runs (without it, each collection draws its own)
     ran = gaitlib_quick("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray",
                         "--workers", "2")
     assert ran.returncode == 0, ran.stderr
@@ -50,7 +51,8 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     with_ray, without = validate(data), validate(plain)
     assert (with_ray.header, with_ray.count) == (without.header, without.count) == (validate(data).header, 24)
     writable = str(copy_library(tiny_library, tmp_path / "library").root)  # fit writes switching/ into it
-    fitted = gaitlib_quick("fit", "--data", data, "--epochs", "2", "--library", writable, "--json")
+    fitted = gaitlib_quick("fit", "--data", data, "--epochs", "2", "--library", writable, "--json",
+                           "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
     assert json.loads(fitted.stdout)["samples"] == 24
 

@@ -144,7 +144,8 @@ def test_a_fit_on_some_pairs_names_the_pairs_it_leaves_uncovered(switching_libra
                             library=library.root, run_dir=tmp_path / "runs", backend="mujoco", eval_episodes=1,
                             eval_seconds=0.3))
     data = switching_library.parent / "samples.h5"  # stand and trot only
-    fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "2", "--library", str(library.root))
+    fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "2", "--library", str(library.root),
+                           "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
     assert "pairs of the library it does not cover: pace-stand, pace-trot, stand-pace, trot-pace" in fitted.stdout
 
@@ -156,7 +157,7 @@ def test_a_fit_on_some_pairs_names_the_pairs_it_leaves_uncovered(switching_libra
     samples = read_all([data], current=Library(library.root).identities())
     stand_trot = samples.samples.source == samples.header.gaits.index("stand")
     samples.samples.success[stand_trot] = 1
-    report = fit_library(Library(library.root), samples, sources=[data], epochs=2)
+    report = fit_library(Library(library.root), samples, sources=[data], epochs=2, min_per_label=0)
     assert report.uncovered == ("pace-stand", "pace-trot", "stand-pace", "trot-pace")
     assert set(report.accuracy()["latent"]) == {"trot-stand"}
     status = json.loads(gaitlib_quick("library", "--library", str(library.root), "--json").stdout)

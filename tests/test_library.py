@@ -72,10 +72,12 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
         return TransitionData(TransitionFileInfo(header, n, [], None), batch)
 
     with pytest.raises(TransitionDataError, match="another 'trot' policy"):  # trot collected with another policy
-        fit_library(library, data((library.identities()["stand"], "f" * 64)), sources=["other.h5"], epochs=1)
+        fit_library(library, data((library.identities()["stand"], "f" * 64)), sources=["other.h5"], epochs=1,
+                    min_per_label=0)
     assert not library.switching_dir.exists()
     own = data(tuple(library.identities().values()))
-    report = fit_library(library, own, sources=[tmp_path / "own.h5"], inputs=("phase", "latent"), epochs=1)
+    report = fit_library(library, own, sources=[tmp_path / "own.h5"], inputs=("phase", "latent"), epochs=1,
+                         min_per_label=0)
     written = json.loads(library.accuracy_path.read_text())
     assert written == report.as_dict() | {"checksum": written["checksum"]} and written["input_written"] == "phase"
     assert written["written"] == [
@@ -121,7 +123,7 @@ elif where == "mid-fit":
 if where == "mid-fit":
     from gaitlib.strategies.fitting import fit_library
 
-    fit_library(library, read(sys.argv[3]), sources=[sys.argv[3]], epochs=1, seed=1)
+    fit_library(library, read(sys.argv[3]), sources=[sys.argv[3]], epochs=1, seed=1, min_per_label=0)
 else:
     entry = library.entry("stand")
     with torch.no_grad():

@@ -60,7 +60,7 @@ def test_fit_writes_into_your_own_library_by_default_and_leaves_the_shipped_one_
     collected = gaitlib("collect", "--library", str(SHIPPED), "--pairs", "trot-stand,stand-trot", "--samples", "32",
                         "--worlds", "16", "--push-max", "1500", "--backend", "mujoco", "--out", str(data))
     assert collected.returncode == 0, collected.stderr
-    fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "1")
+    fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "1", "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
     mine = Library(Path("runs") / "library")
     assert f"wrote {mine.switching_dir}" in fitted.stdout
@@ -102,7 +102,7 @@ def test_a_measurement_of_other_switching_models_is_not_resumed_or_reused(switch
     collected = gaitlib("collect", "--library", str(library.root), "--samples", "8", "--worlds", "4",
                         "--backend", "mujoco", "--out", str(data))
     assert collected.returncode == 0, collected.stderr
-    fit_library(library, read(data), sources=[data], epochs=1, seed=7)  # other switching models
+    fit_library(library, read(data), sources=[data], epochs=1, seed=7, min_per_label=0)  # other switching models
     again = gaitlib_quick(*args)
     assert again.returncode == 2 and again.stderr.count("\n") == 1
     assert "holds a benchmark with other settings (switching)" in again.stderr

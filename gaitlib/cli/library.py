@@ -65,15 +65,17 @@ def library_command(
         detours = "; ".join(f"{pair} through {' -> '.join(path)}" for pair, path in routes["detours"].items())
         console.print(f"route table ({routes['strategy']}, {routes['push_n']:g} N): "
                       f"{detours or 'every pair best directly'}", soft_wrap=True)
-    elif routes is not None:
+    elif routes is not None:  # stale: measured with other switching models or policies (a refit keeps it so)
         console.print(f"problem: {escape(routes['why'])}", soft_wrap=True)
+        if routes["fix"]:
+            console.print(f"  fix: {escape(routes['fix'])}", soft_wrap=True)
     other = status.other_falls()
     if routes is not None and routes.get("falls", DEFAULT_FALLS) != DEFAULT_FALLS:
         other["switching/routes.json"] = routes["falls"]
     if other:
         console.print(f"counted with another definition of a fall than the default ({DEFAULT_FALLS}): "
                       + ", ".join(f"{name} ({falls})" for name, falls in other.items()), soft_wrap=True)
-    if not status.problems:
+    if not status.problems and (routes is None or routes["state"] == "current"):
         console.print("nothing stale: every gait is usable and every pair is covered")
     for problem in status.problems:
         console.print(f"problem: {escape(problem.text)}", soft_wrap=True)
@@ -91,8 +93,9 @@ def _routes(lib, status) -> dict | None:
         return None
     try:
         table = load_routes(lib, status.bundle.gaits)
-    except GaitlibError as stale:
-        return {"state": "stale", "why": str(stale)}
+    except GaitlibError as stale:  # measured with other switching models or policies (a refit keeps it so)
+        why, _, command = str(stale).partition("; measure it again: ")
+        return {"state": "stale", "why": why, "fix": command or None}
     detours = {pair: list(path) for pair, path in table.detours().items()}
     return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours,
             "falls": table.measured_with.get("falls", "contact")}

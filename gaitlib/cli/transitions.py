@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
+from gaitlib.defaults import MIN_PER_LABEL
 from gaitlib.cli.options import (
     CHUNK,
     COUNT,
@@ -52,7 +53,10 @@ def collect_command(
     ),
     worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
-    seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
+    seed: int | None = bounded(
+        None, "--seed", help="Random seed (default: the file's when it is resumed, else one drawn anew and printed, "
+        "so that two collections never draw the same samples);", bounds=SEED,
+    ),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     chunk: int | None = bounded(
         None, "--chunk", help="Samples per chunk, the unit of work and of a commit (default: 16 per world);",
@@ -77,6 +81,11 @@ def collect_command(
     check_out_file("--out", out)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
+    drawn = False
+    if seed is None:  # a resumed file's own seed, else a new one (said at the end)
+        seed = _recorded_seed(out)
+        drawn = seed is None
+        seed = _draw_seed() if drawn else seed
     config = CollectConfig(
         samples=int(samples),
         num_worlds=worlds,
@@ -107,11 +116,32 @@ def collect_command(
         result = collect(out, library=lib, gaits=names, config=config, progress=show, cluster=cluster)
     if result.note:
         console.print(result.note)
+    if drawn:
+        console.print(f"seed {seed}, drawn for this collection (--seed {seed} draws the same samples again)",
+                      soft_wrap=True)
     console.print(
         f"{result.path}: {result.samples:,} samples ({result.written:,} new, {result.samples_per_s:.1f}/s); "
         + ", ".join(f"{m}-{n} {ok}/{k}" for (m, n), (ok, k) in sorted(result.pair_counts.items())),
         soft_wrap=True,
     )
+
+
+def _recorded_seed(out: Path) -> int | None:
+    """The seed the transition file ``out`` records (a collection without ``--seed`` resumes with it), else
+    ``None``."""
+    from gaitlib.transitions.schema import recorded_settings
+
+    recorded = recorded_settings(out) if out.is_file() else None
+    seed = None if recorded is None else recorded.get("seed")
+    return seed if isinstance(seed, int) else None
+
+
+def _draw_seed() -> int:
+    """A seed from the system's entropy, for a new collection without ``--seed``: two collections with one seed
+    draw the same samples (``docs/transitions.md``, "Seeds")."""
+    import secrets
+
+    return secrets.randbelow(int(SEED.high) + 1)
 
 
 def states_command(
@@ -176,12 +206,17 @@ def fit_command(
     ),
     falls: str = falls_option(),
     replace: bool = typer.Option(False, "--replace", help="Fit into the shipped library (refused without it)."),
+    min_per_label: int = bounded(
+        MIN_PER_LABEL, "--min-per-label", help="Fewest successful and fewest failed switches each ordered pair "
+        "needs, so that its held-out fifth validates the fit (0: accept a fit that cannot be validated);",
+        bounds=Bounds(low=0, high=1e6, whole=True),
+    ),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
     from gaitlib.library import Library
     from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
-    from gaitlib.strategies.fitting import evaluate_library, fit_library
+    from gaitlib.strategies.fitting import check_validatable, evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 
@@ -193,18 +228,24 @@ def fit_command(
     target, copy_from = writing_target(library)
     check_writable(target, replace=replace, command="gaitlib fit", what="the switching models")
     samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
+    check_validatable(samples, falls=falls, min_per_label=min_per_label)  # too few to validate: refused here too
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
     if copy_from is not None:
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib fit"):
         lib = Library(target)
-        report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls)
+        report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls,
+                             min_per_label=min_per_label)
     _report(report.as_dict(), as_json)
     if not as_json:
         if report.note:
             print(f"data: {report.note}")
         uncovered = ", ".join(report.uncovered) or "none"
         print(f"wrote {lib.switching_dir}; pairs of the library it does not cover: {uncovered}")
+        if (lib.switching_dir / Library.ROUTES).is_file():
+            print(f"stale now: the route table {lib.switching_dir / Library.ROUTES} was measured with the switching "
+                  f"models this fit replaced; gaitlib library --library {lib.root} gives the command that measures it "
+                  "again")
 
 
 def _report(report: dict, as_json: bool) -> None:

@@ -95,6 +95,9 @@ class Library:
     """The files of :attr:`SWITCHING` that are fitted together and checked against :attr:`CHECKSUMS`."""
     CHECKSUMS = "checksums.json"
     """The SHA-256 of each of the other files of :attr:`SWITCHING`, checked before any of them is used."""
+    ROUTES = "routes.json"
+    """The route table (``gaitlib routes``), in :attr:`SWITCHING`: measured with the models of :attr:`BUNDLE`, whose
+    checksum list it records, so a refit keeps it and it then reads as stale (:mod:`gaitlib.benchmark.routes`)."""
 
     def __init__(self, root: Path | str | None = None) -> None:
         self.root = Path(root) if root is not None else default_library_dir()

@@ -11,13 +11,14 @@ go through these two functions.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.atomic import write_json
-from gaitlib.defaults import DEFAULT_FALLS
-from gaitlib.errors import UnknownNameError
+from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL
+from gaitlib.errors import TransitionDataError, UnknownNameError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import calibrate, save_calibration
@@ -30,6 +31,7 @@ __all__ = [
     "PAPER_PAIRS",
     "PAPER_TABLE_3",
     "FitReport",
+    "check_validatable",
     "evaluate_library",
     "fit_library",
 ]
@@ -67,6 +69,10 @@ class FitReport:
     ``None``."""
     falls: str = DEFAULT_FALLS
     """The definition of a fall the labels followed."""
+    data_sha256: tuple[str, ...] = ()
+    """The content SHA-256 of each file of :attr:`data`, same order
+    (:attr:`~gaitlib.transitions.TransitionFileInfo.files`): which samples the fit saw, whatever the files are called
+    now."""
 
     def accuracy(self) -> dict[str, dict[str, float]]:
         """Input kind -> ``"m-n"`` -> balanced validation accuracy (0-1)."""
@@ -80,6 +86,7 @@ class FitReport:
         return {
             **ACCURACY_FORMAT,
             "data": list(self.data),
+            "data_sha256": list(self.data_sha256),
             "samples": self.samples,
             "input_written": next(iter(self.results)),
             "falls": self.falls,
@@ -104,14 +111,18 @@ def fit_library(
     epochs: int = 100,
     seed: int = 0,
     falls: str = DEFAULT_FALLS,
+    min_per_label: int = MIN_PER_LABEL,
     on_epoch: Callable[[str, EpochStats], None] | None = None,
 ) -> FitReport:
     """Fit ``library``'s transition-net (one per kind in ``inputs``; the first is written), TMT and accuracy report
     on ``data`` (read from ``sources``) and write them into the library.
 
     Refuses, before any work, an unknown input kind and data collected with other policies than the library's
-    (:class:`~gaitlib.errors.TransitionDataError`). ``falls``: the definition of a fall the labels follow (every
-    sample holds both outcomes), recorded in each file written. ``on_epoch(kind, stats)`` reports progress.
+    (:class:`~gaitlib.errors.TransitionDataError`), and data too few to validate (:func:`check_validatable`).
+    ``falls``: the definition of a fall the labels follow (every sample holds both outcomes), recorded in each file
+    written. The library's route table, if it has one, is kept: it names the switching models it was measured with,
+    so ``gaitlib library`` then calls it stale and gives the command that measures it again. ``on_epoch(kind,
+    stats)`` reports progress.
     """
     for kind in inputs:
         if kind not in INPUT_KINDS:
@@ -119,6 +130,7 @@ def fit_library(
     if not inputs:
         raise UnknownNameError("input", "", list(INPUT_KINDS))
     identities = _checked_identities(library, data, sources)
+    check_validatable(data, falls=falls, min_per_label=min_per_label)
     results = {}
     for kind in dict.fromkeys(inputs):
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
@@ -137,6 +149,7 @@ def fit_library(
         uncovered=tuple(pair for pair in ordered_pairs(library.gaits()) if pair not in covered),
         note=data.info.note,
         falls=falls,
+        data_sha256=tuple(content for _, content in data.info.files),
     )
     labelled = data.labelled(falls)
     calibration = calibrate(written.net, labelled, train_rows=written.split.train, identities=identities, falls=falls)
@@ -147,7 +160,32 @@ def fit_library(
         write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
         library.write_checksums(staging)
+        routes = library.switching_dir / Library.ROUTES
+        if routes.is_file():  # measured with the old models: kept, so that it reads as stale, never as missing
+            shutil.copy2(routes, staging / Library.ROUTES)
     return fitted
+
+
+def check_validatable(data: TransitionData, *, falls: str = DEFAULT_FALLS, min_per_label: int = MIN_PER_LABEL) -> None:
+    """Refuse, in one line naming the pairs short of it, data in which an ordered pair has fewer than
+    ``min_per_label`` successful or failed switches (labels by ``falls``): its held-out accuracy would rest on a
+    handful of switches, or on none (:data:`MIN_PER_LABEL`; 0 accepts any data)."""
+    if min_per_label <= 0:
+        return
+    samples, names = data.labelled(falls).samples, data.header.gaits
+    short = []
+    for m, n in sorted(samples.pairs()):
+        success = samples.success[(samples.source == m) & (samples.dest == n)]
+        ok, failed = int(success.sum()), int((~success.astype(bool)).sum())
+        if min(ok, failed) < min_per_label:
+            short.append(f"{names[m]}-{names[n]} ({ok} successes, {failed} failures)")
+    if short:
+        raise TransitionDataError(
+            f"too few samples to validate a fit: each ordered pair needs {min_per_label} successful and "
+            f"{min_per_label} failed switches ({falls} definition of a fall), and {len(short)} pair(s) have fewer: "
+            f"{', '.join(short)}; collect more of them (gaitlib collect resumes a file with a larger --samples), or "
+            "pass --min-per-label 0 to write a fit that cannot be validated"
+        )
 
 
 def evaluate_library(library: Library, data: TransitionData, *, sources: Sequence[Path | str],

@@ -18,6 +18,7 @@ and a table for other policies or models, or not of the format (:func:`check_rou
 from __future__ import annotations
 
 import math
+import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from itertools import pairwise, product
@@ -27,13 +28,13 @@ from gaitlib.atomic import read_json, stale_temporaries, write_json
 from gaitlib.checks import GAIT_NAME, SHA256, check_content, items, number, record, table, text
 from gaitlib.defaults import FALL_DEFINITIONS
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import ordered_pairs
+from gaitlib.library.layout import is_shipped, ordered_pairs
 from gaitlib.library.store import Library
 from gaitlib.stats import wilson_interval
 
 __all__ = ["ROUTES_FILE", "RouteTable", "check_routes", "load_routes"]
 
-ROUTES_FILE = "routes.json"
+ROUTES_FILE = Library.ROUTES
 """The route table's name in the library's switching folder."""
 _FORMAT = {"format": "gaitlib.routes", "format_version": 1}
 _PUSH_N = number(0, 2000, unit="N")
@@ -147,6 +148,7 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
     saved = read_json(path, header=_FORMAT, what="a gaitlib route table", error=GaitlibError)
     again = f"; measure it again: gaitlib routes --library {library.root}"
     check_routes(saved, path=path, strategies=strategy_names(), again=again)
+    again = f"; measure it again: {_measure_again(library, saved)}"
     if saved["switching"] != library.switching_identity():
         raise GaitlibError(f"{path} was measured with other switching models than the library's{again}")
     if set(saved["gaits"]) != set(gaits) or saved["policies"] != library.identities(gaits):
@@ -159,6 +161,16 @@ def load_routes(library: Library, gaits: tuple[str, ...]) -> RouteTable:
     if "detours" in saved and saved["detours"] != {pair: list(p) for pair, p in table.detours().items()}:
         raise GaitlibError(f"{path} is damaged: detours are not the routes its rates give{again}")
     return table
+
+
+def _measure_again(library: Library, saved: Mapping) -> str:
+    """The ``gaitlib routes`` command that measures the (checked) table ``saved`` again as it was measured, on the
+    library's current policies and switching models."""
+    measured = saved["measured_with"]
+    words = ["gaitlib", "routes", "--library", library.root, "--strategy", saved["strategy"], "--push",
+             f"{saved['push_n']:g}", "--max-legs", saved["max_legs"], "--samples", measured["samples"], "--worlds",
+             measured["num_worlds"], "--seed", measured["seed"], "--falls", measured.get("falls", "contact")]
+    return " ".join(shlex.quote(str(w)) for w in words + (["--replace"] if is_shipped(library.root) else []))
 
 
 def check_routes(saved: Mapping, *, path: Path, strategies: Sequence[str], again: str = "") -> None:

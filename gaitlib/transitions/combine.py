@@ -7,10 +7,17 @@ order the transition-net and the TMT index gaits by, whatever order a file was w
 latent size, and on every gait they share (same library identity: the same policy), unless the library's current
 identities are given: then the samples of a pair whose source or destination policy is not the library's current
 one (a gait retrained or removed since) are left out, and the data say so in their note.
+
+The same samples are counted once, whatever the files are called: a file given twice, through a hard link or as a
+copy holds the same committed parts (the same content SHA-256,
+:attr:`~gaitlib.transitions.records.TransitionFileInfo.files`) and is read once; a sample of a later file that is
+byte for byte a sample of an earlier one (two collections with the same seed and settings draw the same samples) is
+left out. The note names each such file, the file it repeats and how many samples were left out.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -57,6 +64,9 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None)
                     f"{path}: {int((~rows).sum()):,} samples of pairs with {stale} left out (collected with another "
                     "policy than the library's)"
                 )
+    repeats, repeated = _repeats(paths, parts)
+    kept_rows = [rows & ~again for rows, again in zip(kept_rows, repeats, strict=True)]
+    notes += repeated
     if not any(rows.any() for rows in kept_rows):
         raise TransitionDataError(
             f"no sample of {', '.join(map(str, paths))} was collected with the library's current policies"
@@ -82,6 +92,51 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None)
     )
     samples = TransitionBatch.concatenate(batches)
     info = TransitionFileInfo(
-        header, len(samples), [session for part in parts for session in part.info.sessions], "; ".join(notes) or None
+        header, len(samples), [session for part in parts for session in part.info.sessions], "; ".join(notes) or None,
+        tuple(file for part in parts for file in part.info.files),
     )
     return TransitionData(info, samples)
+
+
+def _repeats(paths: Sequence[Path], parts: Sequence[TransitionData]) -> tuple[list[np.ndarray], list[str]]:
+    """Per file, (n,) true for the samples an earlier file already holds, and a note naming each file that repeats
+    another and how many of its samples are left out for it."""
+    if len(parts) == 1:
+        return [np.zeros(len(parts[0].samples), dtype=bool)], []
+    first_with: dict[str, Path] = {}
+    seen: dict[bytes, int] = {}
+    repeats, notes = [], []
+    for k, (path, part) in enumerate(zip(paths, parts, strict=True)):
+        count = len(part.samples)
+        content = part.info.files[0][1]
+        if content in first_with:
+            repeats.append(np.ones(count, dtype=bool))
+            if count:
+                notes.append(
+                    f"{path} holds the same {count:,} samples as {first_with[content]} (content SHA-256 "
+                    f"{content[:12]}: one file under two names, a link, a copy, or a collection with the same seed "
+                    "and settings); counted once"
+                )
+            continue
+        first_with[content] = Path(path)
+        digests = _row_digests(part.samples)
+        earlier = np.array([seen.get(d, k) for d in digests], dtype=np.int64)
+        repeats.append(earlier < k)
+        for j, times in zip(*np.unique(earlier[earlier < k], return_counts=True), strict=True):
+            notes.append(
+                f"{path}: {int(times):,} of its {count:,} samples are byte for byte samples of {paths[j]} (collected "
+                "with the same seed and settings); counted once"
+            )
+        for d in digests:
+            seen.setdefault(d, k)
+    return repeats, notes
+
+
+def _row_digests(batch: TransitionBatch) -> list[bytes]:
+    """A 16-byte BLAKE2b digest of every sample's bytes, all its columns together."""
+    count = len(batch)
+    rows = np.concatenate(
+        [np.ascontiguousarray(values).reshape(count, -1).view(np.uint8) for values in batch.columns().values()],
+        axis=1,
+    )
+    return [hashlib.blake2b(row, digest_size=16).digest() for row in rows]

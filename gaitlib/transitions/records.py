@@ -3,11 +3,20 @@ batch of samples, and what a file's samples belong to (:class:`TransitionHeader`
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["COLUMNS", "Column", "TransitionBatch", "TransitionData", "TransitionFileInfo", "TransitionHeader"]
+__all__ = [
+    "COLUMNS",
+    "Column",
+    "TransitionBatch",
+    "TransitionData",
+    "TransitionFileInfo",
+    "TransitionHeader",
+    "content_sha256",
+]
 
 
 @dataclass(frozen=True)
@@ -142,6 +151,15 @@ class TransitionFileInfo:
     """One record per collection run (seed, first chunk, samples at its start, ...)."""
     note: str | None
     """What was noticed but tolerated (uncommitted rows after an interrupted append), else ``None``."""
+    files: tuple[tuple[str, str], ...] = ()
+    """(path, content SHA-256) of each transition file read, in order: the content is the SHA-256 of the committed
+    parts' digests (each the SHA-256 of a part file's bytes, which every read checks), one per line, so it is the
+    same for one file read under two names, through a hard link or as a copy (:func:`content_sha256`)."""
+
+
+def content_sha256(part_digests: tuple[str, ...]) -> str:
+    """The identity of a transition file's committed samples from its parts' SHA-256 digests, in sample order."""
+    return hashlib.sha256("\n".join(part_digests).encode()).hexdigest()
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from gaitlib.transitions.records import (
     TransitionData,
     TransitionFileInfo,
     TransitionHeader,
+    content_sha256,
 )
 
 __all__ = [
@@ -62,6 +63,7 @@ __all__ = [
     "parts_folder",
     "read",
     "read_part",
+    "recorded_settings",
     "scan",
     "validate",
     "write_index",
@@ -190,6 +192,16 @@ def scan(path: Path, *, keep: tuple[str, ...] = ()) -> tuple[TransitionIndex, di
             seen = index
             continue
         return index, {name: _joined(values, COLUMNS[name], index.header) for name, values in kept.items()}
+
+
+def recorded_settings(path: Path) -> dict | None:
+    """The collection settings the index of ``path`` records (its parts unread), or ``None`` where there is no
+    sound transition index at ``path`` (:func:`scan` says what is wrong with it)."""
+    try:
+        with _open(Path(path), str(path)) as f:
+            return _read_index(f, Path(path)).header.settings
+    except (OSError, TransitionDataError):
+        return None
 
 
 def validate(path: Path) -> TransitionFileInfo:
@@ -375,4 +387,5 @@ def _info(path: Path, index: TransitionIndex) -> TransitionFileInfo:
     folder = parts_folder(path)
     stray = [p for p in folder.glob("part-*.h5") if p.name not in listed] if folder.is_dir() else []
     note = f"{path}: {len(stray)} uncommitted part files are ignored" if stray else None
-    return TransitionFileInfo(index.header, index.count, list(index.sessions), note)
+    content = content_sha256(tuple(p.sha256 for p in index.parts))
+    return TransitionFileInfo(index.header, index.count, list(index.sessions), note, ((str(path), content),))
