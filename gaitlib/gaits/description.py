@@ -6,7 +6,9 @@ A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :clas
     name = "trot"             # optional; defaults to the file name without ".toml"
     duty_factor = 0.6         # fraction of the cycle each foot is on the ground
     stride_frequency = 2.0    # Hz
-    forward_speed = 0.5       # m/s
+    forward_speed = 0.5       # m/s, negative backward
+    lateral_speed = 0.0       # m/s, optional: sideways, positive to the left
+    yaw_rate = 0.0            # rad/s, optional: turning, positive counter-clockwise (to the left)
     swing_height = 0.06       # m
     body_height = 0.26        # m
     foot_lateral_offset = 0.0 # m, optional
@@ -22,6 +24,7 @@ A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :clas
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -38,8 +41,10 @@ class GaitDescription:
     """A periodic gait of the A1, from which :func:`gaitlib.gaits.clip_from_description` builds a reference clip.
 
     Each foot is in stance for ``duty_factor`` of the cycle starting at its phase offset, then swings. The trunk
-    moves forward at constant speed with level orientation, straight or (``trunk_sway``) swaying sideways over its
-    stance feet, at constant height or (``trunk_bounce``) rising and falling as its feet push.
+    moves at a constant velocity in its own frame (``forward_speed``, ``lateral_speed``) and turns at a constant
+    ``yaw_rate`` with level orientation (a straight line without a yaw rate, a circle with one), straight or
+    (``trunk_sway``) swaying sideways over its stance feet, at constant height or (``trunk_bounce``) rising and
+    falling as its feet push.
     """
 
     name: str
@@ -52,7 +57,8 @@ class GaitDescription:
     stride_frequency: float
     """Gait cycles per second, Hz (the period is its inverse; a standing gait still has one, so phase is defined)."""
     forward_speed: float
-    """Trunk speed along its x axis, m/s (the stride length is ``forward_speed / stride_frequency``)."""
+    """Trunk speed along its x axis, m/s, negative backward (the stride length is
+    ``forward_speed / stride_frequency``)."""
     swing_height: float
     """Highest lift of a swinging foot above the ground, m."""
     body_height: float
@@ -61,6 +67,12 @@ class GaitDescription:
     foot_lateral_offset: float = 0.0
     """Sideways shift of each foot from below its thigh joint, m, positive away from the body midline (widens the
     stance)."""
+    lateral_speed: float = 0.0
+    """Trunk speed along its y axis, m/s, positive to the left (legged_gym's ``lin_vel_y`` command)."""
+    yaw_rate: float = 0.0
+    """Trunk turning rate about the vertical, rad/s, positive counter-clockwise (to the left; legged_gym's
+    ``ang_vel_yaw`` command): the trunk turns ``yaw_rate / stride_frequency`` rad per cycle and runs on a circle
+    of radius ``|velocity| / |yaw_rate|``."""
     trunk_sway: bool = False
     """Sway the trunk sideways as a linear inverted pendulum balanced over the stance feet
     (:func:`gaitlib.gaits.trunk_sway`), as a pacing animal does; false: the trunk runs straight. A gait whose
@@ -84,6 +96,8 @@ class GaitDescription:
             "duty_factor",
             "stride_frequency",
             "forward_speed",
+            "lateral_speed",
+            "yaw_rate",
             "swing_height",
             "body_height",
             "foot_lateral_offset",
@@ -106,12 +120,26 @@ class GaitDescription:
             raise fail(f"duty_factor must be in (0, 1], got {self.duty_factor}")
         if self.stride_frequency <= 0.0:
             raise fail(f"stride_frequency must be positive (Hz), got {self.stride_frequency}")
-        if self.duty_factor == 1.0 and self.forward_speed != 0.0:
-            raise fail("a gait whose feet never lift (duty_factor 1) cannot move (forward_speed must be 0)")
+        if self.duty_factor == 1.0 and (self.forward_speed, self.lateral_speed, self.yaw_rate) != (0.0, 0.0, 0.0):
+            raise fail("a gait whose feet never lift (duty_factor 1) cannot move or turn (forward_speed, "
+                       "lateral_speed and yaw_rate must be 0)")
+        if abs(self.cycle_yaw) >= math.pi:
+            raise fail(f"yaw_rate {self.yaw_rate:g} rad/s turns the trunk {self.cycle_yaw:.2f} rad per cycle; a gait "
+                       "turns less than half a turn (pi rad) per cycle")
         if self.swing_height < 0.0:
             raise fail(f"swing_height must be >= 0 m, got {self.swing_height}")
         if self.body_height <= FOOT_RADIUS:
             raise fail(f"body_height must exceed the foot radius {FOOT_RADIUS} m, got {self.body_height}")
+
+    def record(self) -> dict:
+        """The description as a JSON-ready dict (a library entry's ``"description"``), without ``lateral_speed`` and
+        ``yaw_rate`` where they are 0: a gait that runs straight is recorded as before those fields existed, and a
+        record without them reads back as 0."""
+        record = dataclasses.asdict(self)
+        for key in ("lateral_speed", "yaw_rate"):
+            if record[key] == 0.0:
+                del record[key]
+        return record
 
     @property
     def period(self) -> float:
@@ -120,12 +148,18 @@ class GaitDescription:
 
     @property
     def stride_length(self) -> float:
-        """Distance the trunk travels per cycle, m."""
+        """Distance the trunk travels along its x axis per cycle of a gait without yaw rate, m (negative
+        backward)."""
         return self.forward_speed / self.stride_frequency
+
+    @property
+    def cycle_yaw(self) -> float:
+        """Angle the trunk turns per cycle, rad, counter-clockwise."""
+        return self.yaw_rate / self.stride_frequency
 
 
 _SCALAR_KEYS = ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height")
-_OPTIONAL_KEYS = ("name", "foot_lateral_offset", "trunk_sway", "trunk_bounce")
+_OPTIONAL_KEYS = ("name", "lateral_speed", "yaw_rate", "foot_lateral_offset", "trunk_sway", "trunk_bounce")
 
 
 def load_gait_file(path: str | Path) -> GaitDescription:
@@ -153,6 +187,8 @@ def load_gait_file(path: str | Path) -> GaitDescription:
         return GaitDescription(
             name=table.get("name", path.stem),
             phase_offsets=tuple(offsets[leg] for leg in LEG_NAMES),
+            lateral_speed=table.get("lateral_speed", 0.0),
+            yaw_rate=table.get("yaw_rate", 0.0),
             foot_lateral_offset=table.get("foot_lateral_offset", 0.0),
             trunk_sway=table.get("trunk_sway", False),
             trunk_bounce=table.get("trunk_bounce", False),

@@ -26,7 +26,6 @@ the SHA-256 of ``policy.pt`` that identifies the entry to transition data and tr
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import shutil
 from collections.abc import Iterable, Mapping
@@ -275,7 +274,7 @@ class Library:
             metadata = {
                 "format_version": FORMAT_VERSION,
                 "gait": description.name,
-                "description": dataclasses.asdict(description),
+                "description": description.record(),
                 "robot": "a1",
                 "observation": obs_fn.layout(observation),
                 "action": action,

@@ -56,7 +56,8 @@ _DESCRIPTION = record(
         "forward_speed": number(-10, 10, unit="m/s"), "swing_height": number(0, 1, unit="m"),
         "body_height": number(0, 2, low_open=True, unit="m"),
     },
-    {"foot_lateral_offset": number(-1, 1, unit="m"), "trunk_sway": flag(), "trunk_bounce": flag()},
+    {"lateral_speed": number(-10, 10, unit="m/s"), "yaw_rate": number(-20, 20, unit="rad/s"),
+     "foot_lateral_offset": number(-1, 1, unit="m"), "trunk_sway": flag(), "trunk_bounce": flag()},
 )
 _PRESET = record(
     {"name": text()},
