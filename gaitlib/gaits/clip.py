@@ -1,9 +1,13 @@
 """Reference clips: a robot motion stored as frames on a uniform phase grid, read back at any phase.
 
 A clip holds ``K + 1`` frames at phases ``k / K`` (k = 0..K), so the first and last frames bracket the whole clip.
-A looping clip repeats with period :attr:`ReferenceClip.period`: its last frame is its first frame shifted by
-:attr:`ReferenceClip.cycle_displacement`, so joint angles and velocities wrap seamlessly and the trunk advances by
-that displacement per cycle. A non-looping clip holds its end frames outside [0, 1].
+A looping clip repeats with period :attr:`ReferenceClip.period`: its last frame is its first frame turned by
+:attr:`ReferenceClip.cycle_yaw` about the vertical through the first frame's trunk and shifted by
+:attr:`ReferenceClip.cycle_displacement`, so joint angles and velocities wrap seamlessly and the trunk advances
+(and turns) by that much per cycle. Cycle k's frames are cycle 0's turned by ``k * cycle_yaw`` about that vertical
+and shifted by the displacements of the cycles before, each turned by its own cycle's yaw:
+``sum_{i<k} Rz(i * cycle_yaw) cycle_displacement`` (a trunk that turns runs on a circle and comes back). A
+non-looping clip holds its end frames outside [0, 1].
 
 Frames are linearly interpolated (the orientation by normalized linear interpolation); contact flags come from
 the nearest frame. Units SI; the world frame is z up; quaternions are (w, x, y, z), trunk to world.
@@ -11,6 +15,7 @@ the nearest frame. Units SI; the world frame is z up; quaternions are (w, x, y, 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +23,7 @@ import torch
 
 from gaitlib.gaits.kinematics import forward_kinematics
 from gaitlib.robots.a1.constants import NUM_JOINTS, NUM_LEGS
-from gaitlib.rotations import quat_conjugate, quat_multiply, quat_rotate, quat_to_rotation_vector
+from gaitlib.rotations import quat_conjugate, quat_from_yaw, quat_multiply, quat_rotate, quat_to_rotation_vector
 
 __all__ = ["ClipFrame", "ReferenceClip"]
 
@@ -99,10 +104,11 @@ class ReferenceClip:
     contact: np.ndarray
     """(K+1, 4) bool: the foot is on the ground."""
     cycle_displacement: np.ndarray
-    """(3,) world-frame trunk displacement per cycle of a looping clip, m (zero for a non-looping clip)."""
-    _tables: dict[torch.device, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = field(
-        default_factory=dict, init=False, repr=False
-    )
+    """(3,) world-frame trunk displacement over cycle 0 of a looping clip, last frame's trunk minus first's, m
+    (zero for a non-looping clip; z is 0)."""
+    cycle_yaw: float = 0.0
+    """Trunk turn per cycle of a looping clip, rad, counter-clockwise, in (-pi, pi) (0 for a non-looping clip)."""
+    _tables: dict[torch.device, tuple[torch.Tensor, ...]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         frames = self.root_pos.shape[0]
@@ -126,6 +132,12 @@ class ReferenceClip:
                 raise ValueError(f"reference clip field {name} has shape {array.shape}, expected {shape}")
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+        turn = self.cycle_yaw
+        if isinstance(turn, bool) or not isinstance(turn, (int, float)) or not abs(turn) < math.pi:
+            raise ValueError(f"a clip's cycle_yaw must be a number of rad in (-pi, pi), got {turn!r}")
+        if turn != 0.0 and not self.loop:
+            raise ValueError("only a looping clip turns per cycle (cycle_yaw must be 0)")
+        object.__setattr__(self, "cycle_yaw", float(turn))
 
     @classmethod
     def from_frames(
@@ -139,19 +151,22 @@ class ReferenceClip:
         joint_pos: np.ndarray,
         contact: np.ndarray,
         cycle_displacement: np.ndarray | None = None,
+        cycle_yaw: float = 0.0,
     ) -> ReferenceClip:
         """Build a clip from poses, deriving velocities by central finite differences and feet by kinematics.
 
         Args:
             name: see :attr:`name`.
             frame_duration: time between frames, s.
-            loop: see :attr:`loop`. A looping clip's last frame must be its first pose, displaced by
-                ``cycle_displacement``; differences then wrap around the seam.
+            loop: see :attr:`loop`. A looping clip's last frame must be its first pose, turned by ``cycle_yaw``
+                and displaced by ``cycle_displacement`` (the module docstring); differences then wrap around the
+                seam.
             root_pos: (K+1, 3) trunk positions, world frame, m.
             root_quat: (K+1, 4) trunk orientations (w, x, y, z); normalized here.
             joint_pos: (K+1, 12) joint angles, rad.
             contact: (K+1, 4) bool foot contacts.
-            cycle_displacement: (3,) trunk displacement per cycle, m; defaults to zero.
+            cycle_displacement: (3,) trunk displacement over cycle 0, m; defaults to zero.
+            cycle_yaw: trunk turn per cycle, rad; defaults to zero.
         """
         root_pos = np.asarray(root_pos, dtype=np.float64)
         joint_pos = np.asarray(joint_pos, dtype=np.float64)
@@ -162,13 +177,24 @@ class ReferenceClip:
                 quat[k] = -quat[k]
         displacement = np.zeros(3) if cycle_displacement is None else np.asarray(cycle_displacement, np.float64)
         if not loop:
-            displacement = np.zeros(3)
+            displacement, cycle_yaw = np.zeros(3), 0.0
 
         prev, nxt, span = _neighbours(len(root_pos), frame_duration, loop=loop)
         lin_vel = (root_pos[nxt] - root_pos[prev]) / span
-        if loop:  # the seam frames' outer neighbours lie one cycle displacement before and after
-            lin_vel[[0, -1]] += displacement / span[[0, -1]]
-        ang_vel = quat_to_rotation_vector(quat_multiply(quat_conjugate(quat[prev]), quat[nxt])) / span
+        before, after = quat[prev], quat[nxt]
+        if loop:
+            # The seam frames' outer neighbours lie in the cycles before and after: the step before the first frame
+            # is the step before the last turned back by a cycle's yaw, the step after the last frame the step after
+            # the first turned on by it (without yaw: both just one displacement further).
+            step_in, step_out = root_pos[-2] - root_pos[-1], root_pos[1] - root_pos[0]
+            seam = displacement + np.stack(
+                [step_in - _turn(step_in, -cycle_yaw), _turn(step_out, cycle_yaw) - step_out]
+            )
+            lin_vel[[0, -1]] += seam / span[[0, -1]]
+            if cycle_yaw != 0.0:
+                before[0] = quat_multiply(quat_from_yaw(np.float64(-cycle_yaw)), quat[-2])
+                after[-1] = quat_multiply(quat_from_yaw(np.float64(cycle_yaw)), quat[1])
+        ang_vel = quat_to_rotation_vector(quat_multiply(quat_conjugate(before), after)) / span
         joint_vel = (joint_pos[nxt] - joint_pos[prev]) / span
         feet_local = forward_kinematics(joint_pos)
         feet_world = root_pos[:, None, :] + quat_rotate(quat[:, None, :], feet_local)
@@ -186,6 +212,7 @@ class ReferenceClip:
             foot_pos_world=feet_world,
             contact=contact,
             cycle_displacement=displacement,
+            cycle_yaw=cycle_yaw,
         )
 
     @property
@@ -208,12 +235,13 @@ class ReferenceClip:
 
         Args:
             phase: (N,) phase in cycles. A looping clip wraps it (a phase of 2.25 is a quarter into the third
-                cycle, with the trunk two cycle displacements further on); a non-looping clip clamps it to [0, 1].
+                cycle, with the trunk two cycle displacements further on, and turned by two cycle yaws); a
+                non-looping clip clamps it to [0, 1].
 
         Returns:
             The :class:`ClipFrame` of the N phases.
         """
-        table, contact, displacement = self._device_tables(phase.device)
+        table, contact, displacement, turn = self._device_tables(phase.device)
         phase = phase.to(torch.float32)
         if self.loop:
             cycles = torch.floor(phase)
@@ -228,30 +256,58 @@ class ReferenceClip:
         row = table[lower] * (1.0 - weight) + table[lower + 1] * weight
         columns = row.split([w for _, w in _TABLE_FIELDS], dim=-1)
         values = dict(zip((n for n, _ in _TABLE_FIELDS), columns, strict=True))
-        shift = cycles.unsqueeze(-1) * displacement
         count = phase.shape[0]
+        root_quat = torch.nn.functional.normalize(values["root_quat"], dim=-1)
+        root_pos, root_lin_vel = values["root_pos"], values["root_lin_vel"]
+        foot_pos_world = values["foot_pos_world"].reshape(count, NUM_LEGS, 3)
+        if self.cycle_yaw == 0.0:
+            shift = cycles.unsqueeze(-1) * displacement
+            root_pos, foot_pos_world = root_pos + shift, foot_pos_world + shift.unsqueeze(1)
+        else:  # turned by k cycle yaws about the first frame's trunk, shifted by the turned displacements before
+            yaw, pivot, circle = turn[0], turn[1:4], turn[4:6]
+            spin = quat_from_yaw(cycles * yaw)
+            cos, sin = torch.cos(cycles * yaw), torch.sin(cycles * yaw)
+            # sum_{i<k} Rz(i yaw) d = c (1 - e^{i k yaw}) in the complex plane, c = d / (1 - e^{i yaw})
+            shift = torch.stack([circle[0] * (1.0 - cos) + circle[1] * sin, circle[1] * (1.0 - cos) - circle[0] * sin,
+                                 torch.zeros_like(cos)], dim=-1) + pivot
+            root_pos = quat_rotate(spin, root_pos - pivot) + shift
+            foot_pos_world = quat_rotate(spin.unsqueeze(1), foot_pos_world - pivot) + shift.unsqueeze(1)
+            root_quat = quat_multiply(spin, root_quat)
+            root_lin_vel = quat_rotate(spin, root_lin_vel)
         return ClipFrame(
-            root_pos=values["root_pos"] + shift,
-            root_quat=torch.nn.functional.normalize(values["root_quat"], dim=-1),
-            root_lin_vel=values["root_lin_vel"],
+            root_pos=root_pos,
+            root_quat=root_quat,
+            root_lin_vel=root_lin_vel,
             root_ang_vel=values["root_ang_vel"],
             joint_pos=values["joint_pos"],
             joint_vel=values["joint_vel"],
             foot_pos_local=values["foot_pos_local"].reshape(count, NUM_LEGS, 3),
-            foot_pos_world=values["foot_pos_world"].reshape(count, NUM_LEGS, 3) + shift.unsqueeze(1),
+            foot_pos_world=foot_pos_world,
             contact=contact[position.round().long().clamp(0, intervals)],
         )
 
-    def _device_tables(self, device: torch.device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The float32 frame table (K+1, 61), contact table (K+1, 4) and displacement (3,) on ``device``."""
+    def _device_tables(self, device: torch.device) -> tuple[torch.Tensor, ...]:
+        """The float32 frame table (K+1, 61), contact table (K+1, 4), displacement (3,) and turn (6,) on ``device``:
+        the cycle yaw (rad), the pivot (the first frame's trunk on the ground, m) and the turning sum's factor
+        ``d / (1 - e^{i yaw})`` as (real, imaginary), m."""
         if device not in self._tables:
             rows = np.concatenate([getattr(self, n).reshape(self.num_frames, w) for n, w in _TABLE_FIELDS], axis=1)
+            d = complex(*self.cycle_displacement[:2])
+            circle = d / (1.0 - complex(math.cos(self.cycle_yaw), math.sin(self.cycle_yaw))) if self.cycle_yaw else 0j
+            pivot = (*self.root_pos[0, :2], 0.0)
             self._tables[device] = (
                 torch.tensor(rows, dtype=torch.float32, device=device),
                 torch.tensor(self.contact, device=device),
                 torch.tensor(self.cycle_displacement, dtype=torch.float32, device=device),
+                torch.tensor([self.cycle_yaw, *pivot, circle.real, circle.imag], dtype=torch.float32, device=device),
             )
         return self._tables[device]
+
+
+def _turn(vector: np.ndarray, yaw: float) -> np.ndarray:
+    """(3,) ``vector`` turned by ``yaw`` rad about z (itself, exactly, for a yaw of 0)."""
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    return np.array([cos * vector[0] - sin * vector[1], sin * vector[0] + cos * vector[1], vector[2]])
 
 
 def _neighbours(frames: int, frame_duration: float, *, loop: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

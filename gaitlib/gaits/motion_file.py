@@ -5,7 +5,10 @@ plays once), ``FrameDuration`` (s) and ``Frames``, each frame 19 numbers: root p
 root orientation quaternion x, y, z, w (trunk to world), and the 12 joint angles (rad) in the A1 joint order
 FR, FL, RR, RL x (hip abduction, thigh, calf). With ``"EnableCycleOffsetPosition": true`` a wrapping clip's trunk
 advances per cycle by the horizontal displacement from its first to its last frame (otherwise it returns to its
-start each cycle, as in motion_imitation); ``EnableCycleOffsetRotation`` is not supported and ignored.
+start each cycle, as in motion_imitation); with ``"EnableCycleOffsetRotation": true`` it also turns per cycle by
+its heading change from first to last frame (:attr:`~gaitlib.gaits.ReferenceClip.cycle_yaw`), about the vertical
+through its first frame's trunk (motion_imitation turns about the world origin: the same for a clip that starts
+there).
 Velocities are finite differences, foot positions come from the A1's forward kinematics, and foot contacts are
 estimated from foot heights.
 """
@@ -23,6 +26,7 @@ import numpy as np
 from gaitlib.errors import GaitError
 from gaitlib.gaits.clip import ReferenceClip
 from gaitlib.robots.a1.constants import NUM_JOINTS
+from gaitlib.rotations import yaw_of
 
 __all__ = ["load_motion_file", "save_motion_file"]
 
@@ -51,7 +55,7 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
         raise fail(f"cannot read motion file: {error}") from error
-    loop, duration, table, displacement = _parse(data, fail)
+    loop, duration, table, displacement, turn = _parse(data, fail)
     clip = ReferenceClip.from_frames(
         name=path.stem,
         frame_duration=duration,
@@ -61,15 +65,16 @@ def load_motion_file(path: str | Path, *, contact_tolerance: float = 0.01) -> Re
         joint_pos=table[:, 7:],
         contact=np.zeros((len(table), 4), dtype=bool),
         cycle_displacement=displacement,
+        cycle_yaw=turn,
     )
     heights = clip.foot_pos_world[..., 2]
     return dataclasses.replace(clip, contact=heights <= heights.min() + contact_tolerance)
 
 
 
-def _parse(data: object, fail: Callable[[str], GaitError]) -> tuple[bool, float, np.ndarray, np.ndarray]:
-    """Check a motion file's JSON; return whether it loops, its frame duration (s), its (K, 19) frame table and its
-    per-cycle trunk displacement (3,), m."""
+def _parse(data: object, fail: Callable[[str], GaitError]) -> tuple[bool, float, np.ndarray, np.ndarray, float]:
+    """Check a motion file's JSON; return whether it loops, its frame duration (s), its (K, 19) frame table, its
+    per-cycle trunk displacement (3,), m, and its per-cycle turn, rad."""
     if not isinstance(data, dict):
         raise fail("a motion file must hold a JSON object with LoopMode, FrameDuration and Frames")
     missing = [key for key in ("LoopMode", "FrameDuration", "Frames") if key not in data]
@@ -105,7 +110,16 @@ def _parse(data: object, fail: Callable[[str], GaitError]) -> tuple[bool, float,
         raise fail(f"EnableCycleOffsetPosition must be true or false, got {offset!r}")
     displacement = table[-1, :3] - table[0, :3] if offset else np.zeros(3)
     displacement[2] = 0.0
-    return loop, float(duration), table, displacement
+    rotation = data.get("EnableCycleOffsetRotation", False)
+    if not isinstance(rotation, bool):
+        raise fail(f"EnableCycleOffsetRotation must be true or false, got {rotation!r}")
+    turn = 0.0
+    if rotation and loop:  # the trunk's heading change over the clip, (-pi, pi)
+        heading = yaw_of(table[[0, -1]][:, [6, 3, 4, 5]])
+        turn = float((heading[1] - heading[0] + np.pi) % (2.0 * np.pi) - np.pi)
+        if not abs(turn) < np.pi:
+            raise fail("EnableCycleOffsetRotation: the clip turns half a turn (pi rad) per cycle; a clip turns less")
+    return loop, float(duration), table, displacement, turn
 
 
 def save_motion_file(clip: ReferenceClip, path: str | Path) -> None:
@@ -116,7 +130,7 @@ def save_motion_file(clip: ReferenceClip, path: str | Path) -> None:
         "LoopMode": "Wrap" if clip.loop else "Clamp",
         "FrameDuration": clip.frame_duration,
         "EnableCycleOffsetPosition": bool(clip.loop and np.any(clip.cycle_displacement != 0.0)),
-        "EnableCycleOffsetRotation": False,
+        "EnableCycleOffsetRotation": bool(clip.loop and clip.cycle_yaw != 0.0),
         "Frames": frames.tolist(),
     }
     Path(path).write_text(json.dumps(data), encoding="utf-8")
