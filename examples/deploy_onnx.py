@@ -35,14 +35,19 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float, sta
     def yaw(quat: np.ndarray) -> float:  # rotation about world z of a (w, x, y, z) quaternion, rad
         return np.arctan2(2 * (quat[0] * quat[3] + quat[1] * quat[2]), 1 - 2 * (quat[2] ** 2 + quat[3] ** 2))
 
+    turn = ref.get("cycle_yaw", {"value": 0.0})["value"]  # how far a turning reference turns per cycle, rad
+
     def row(phase: float) -> np.ndarray:  # the reference at a phase, linearly interpolated
         x = (phase % 1.0 if ref["loop"] else min(max(phase, 0.0), 1.0)) * last
         i = min(int(x), last - 1)
         return rows[i] + (x - i) * (rows[i + 1] - rows[i])
 
+    def reference_yaw(phase: float) -> float:  # the yaw column, plus the turns of the cycles before
+        return row(phase)[width] + turn * np.floor(phase)
+
     policy = onnxruntime.InferenceSession(str(Path(entry) / "policy.onnx"))
     action, phase, history, rot = np.zeros(len(q)), start_phase, [], np.zeros(9)
-    anchor = yaw(d.qpos[3:7]) - row(start_phase)[width]  # the reference faces the robot's heading at the start
+    anchor = yaw(d.qpos[3:7]) - reference_yaw(start_phase)  # the reference faces the robot's heading at the start
     mujoco.mj_forward(m, d)
     for _ in range(round(seconds * ctl["rate_hz"])):
         mujoco.mju_quat2Mat(rot, d.qpos[3:7])  # trunk-to-world rotation R, row-major: R^T (0, 0, -1) = -R[2]
@@ -53,7 +58,7 @@ def deploy(m: mujoco.MjModel, d: mujoco.MjData, entry: Path, seconds: float, sta
         history = [frame] * obs["history"]["frames"] if not history else [frame, *history[:-1]]  # newest first
         o = history + [row(phase + k * step)[:width] for k in ref["offsets_steps"]]
         if "heading" in obs:  # the reference's heading minus the trunk's, wrapped to [-pi, pi)
-            o.append([(anchor + row(phase)[width] - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])
+            o.append([(anchor + reference_yaw(phase) - yaw(d.qpos[3:7]) + np.pi) % (2 * np.pi) - np.pi])
         o = np.concatenate(o).astype(np.float32)
         action = np.clip(policy.run(None, {dep["onnx"]["inputs"][0]["name"]: o[None]})[0][0], -act["clip"], act["clip"])
         yield o, action

@@ -26,10 +26,11 @@ __all__ = ["eval_command", "train_command"]
 
 
 def _description(gait: str, gait_file: Path | None):
-    from gaitlib.gaits import get_gait, load_gait_file
+    from gaitlib.gaits import clip_from_description, get_gait, load_gait_file
 
     if gait_file is not None:
         description = load_gait_file(gait_file)
+        clip_from_description(description)  # a gait its feet cannot carry: one line, before any work
         if description.name != gait:
             from gaitlib.errors import GaitError
 

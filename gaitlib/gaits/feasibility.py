@@ -30,6 +30,7 @@ import numpy as np
 
 from gaitlib.errors import GaitError
 from gaitlib.gaits.clip import ReferenceClip
+from gaitlib.rotations import yaw_of
 
 __all__ = ["TILT_LIMIT_DEG", "ReferenceCheck", "check_reference", "composite_inertia"]
 
@@ -50,8 +51,8 @@ class ReferenceCheck:
     gait: str
     """The clip's name."""
     tilt_deg: tuple[float, float]
-    """Largest trunk roll and pitch (about the world x and y axes) the missing moment forces, half the
-    peak-to-peak swing, degrees; the reference itself has none of it."""
+    """Largest trunk roll and pitch (about the reference trunk's heading x and y axes, which turn with a turning
+    gait) the missing moment forces, half the peak-to-peak swing, degrees; the reference itself has none of it."""
     outside_share: float
     """Share of the cycle in which the reference's zero-moment point lies outside its support set, or it has no
     support at all, in [0, 1]."""
@@ -152,11 +153,14 @@ def check_reference(clip: ReferenceClip) -> ReferenceCheck:
 
     mass, inertia = composite_inertia()
     dt = clip.period / _SAMPLES
-    frame = clip.frame(torch.arange(_SAMPLES, dtype=torch.float64) / _SAMPLES)
-    feet = frame.foot_pos_world.double().numpy()[..., :2]  # (N, 4, 2): on the ground plane
-    contact = frame.contact.numpy()
+    # One sample either side of the cycle, read from the cycles before and after: a turning clip's velocities and
+    # momenta turn from cycle to cycle, so the rates at the seam are differences across it, not around one cycle.
+    frame = clip.frame(torch.arange(-1, _SAMPLES + 1, dtype=torch.float64) / _SAMPLES)
+    feet = frame.foot_pos_world.double().numpy()[1:-1, :, :2]  # (N, 4, 2): on the ground plane
+    contact = frame.contact.numpy()[1:-1]
     centre, velocity, momentum = _centroidal(frame)
-    acceleration, momentum_rate = _periodic_rate(velocity, dt), _periodic_rate(momentum, dt)
+    acceleration, momentum_rate = _central_rate(velocity, dt), _central_rate(momentum, dt)
+    centre, velocity = centre[1:-1], velocity[1:-1]
     force = mass * (acceleration + np.array([0.0, 0.0, _GRAVITY]))
     supported = contact.any(-1) & (force[:, 2] > 0.0)
     lift = np.where(supported, force[:, 2], 1.0)  # N; 1 where unsupported, only to keep the division finite
@@ -168,7 +172,8 @@ def check_reference(clip: ReferenceClip) -> ReferenceCheck:
     gap = nearest - zmp
     missing = np.where(
         supported[:, None], force[:, 2:3] * np.stack([gap[:, 1], -gap[:, 0]], axis=-1), -momentum_rate[:, :2]
-    )  # (N, 2) roll and pitch moment the feet cannot give, N m
+    )  # (N, 2) moment about the world x and y axes the feet cannot give, N m
+    missing = _heading_frame(missing, yaw_of(frame.root_quat).double().numpy()[1:-1])  # a turning trunk's roll, pitch
     outside = ~supported | (np.linalg.norm(gap, axis=-1) > 1e-9)
     steady = missing.mean(0)
     swing = np.cumsum(missing - steady, axis=0) * dt
@@ -187,9 +192,16 @@ def check_reference(clip: ReferenceClip) -> ReferenceCheck:
     )
 
 
-def _periodic_rate(values: np.ndarray, dt: float) -> np.ndarray:
-    """Time derivative of (N, ...) samples of one cycle, by central differences that wrap around."""
-    return (np.roll(values, -1, axis=0) - np.roll(values, 1, axis=0)) / (2.0 * dt)
+def _heading_frame(vectors: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """(N, 2) horizontal world-frame ``vectors`` in the frame turned by ``yaw`` (N,) rad (unchanged for a yaw of 0)."""
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    return np.stack([cos * vectors[:, 0] + sin * vectors[:, 1], cos * vectors[:, 1] - sin * vectors[:, 0]], axis=-1)
+
+
+def _central_rate(values: np.ndarray, dt: float) -> np.ndarray:
+    """Time derivative (N, ...) of (N + 2, ...) samples ``dt`` apart at their N inner samples, by central
+    differences."""
+    return (values[2:] - values[:-2]) / (2.0 * dt)
 
 
 def _nearest_support_point(points: np.ndarray, feet: np.ndarray, contact: np.ndarray) -> np.ndarray:

@@ -1,14 +1,20 @@
 """From a gait description to a reference clip: foot trajectories planned in the trunk frame, then leg IK.
 
-The trunk moves at ``forward_speed`` along x with level orientation, at ``body_height`` or rising and falling
-about it (:func:`trunk_height`), straight or swaying (:func:`trunk_sway`). Each foot has a neutral
-point below its thigh joint (hip x, hip y plus thigh offset, shifted outward by ``foot_lateral_offset``) on the
-ground. Leg phase ``psi = (phase - phase_offset) mod 1``:
+The trunk moves with level orientation at the constant velocity ``v = (forward_speed, lateral_speed)`` in its
+own frame while turning at ``yaw_rate`` ``w`` (a straight line, or a circle of radius ``|v| / |w|``), at
+``body_height`` or rising and falling about it (:func:`trunk_height`), straight or swaying (:func:`trunk_sway`).
+Each foot has a neutral point below its thigh joint (hip x, hip y plus thigh offset, shifted outward by
+``foot_lateral_offset``) on the ground. Leg phase ``psi = (phase - phase_offset) mod 1``:
 
-* stance, ``psi < duty_factor``: the foot stays still in the world, so in the trunk frame it slides backward at
-  the forward speed, from ``+d/2`` to ``-d/2`` about the neutral point, where ``d = duty_factor * stride_length``;
-* swing: with swing progress ``s`` in [0, 1), the foot moves forward one stride length in the world along a
-  cycloid, ``stride_length * (s - sin(2 pi s) / (2 pi))`` (zero velocity at lift-off and touchdown), and lifts by
+* stance, ``psi < duty_factor``: the foot stays still in the world, so in the trunk frame it moves with velocity
+  ``-(v + w x p)``: without a yaw rate it slides straight back, from ``+D/2`` to ``-D/2`` about the neutral point,
+  where ``D = duty_factor * v / stride_frequency``; with one it turns about the trunk's instantaneous centre of
+  rotation ``(-v_y, v_x) / w``. The stroke is centred in time on the neutral point (the foot passes it at
+  mid-stance), so its touchdown and lift-off points lie symmetrically about it (Raibert 1986, "Legged Robots That
+  Balance", MIT Press: the neutral point placement);
+* swing: with swing progress ``s`` in [0, 1), the foot moves in the world along a straight line from its lift-off
+  to its next touchdown point by the cycloid ``s - sin(2 pi s) / (2 pi)`` of the way (zero velocity at lift-off and
+  touchdown; one stride ``v / stride_frequency`` without a yaw rate), and lifts by
   ``swing_height * (1 - cos(2 pi s)) / 2`` (apex at mid-swing, zero vertical velocity at both ends).
 
 Foot positions are contact-sphere centres; a foot on the ground has its centre one foot radius above it.
@@ -25,9 +31,12 @@ from gaitlib.gaits.clip import ReferenceClip
 from gaitlib.gaits.description import GaitDescription
 from gaitlib.gaits.kinematics import forward_kinematics, inverse_kinematics
 from gaitlib.robots.a1.constants import FOOT_RADIUS, HIP_OFFSETS, JOINT_LOWER, JOINT_UPPER, THIGH_OFFSET_Y
+from gaitlib.rotations import quat_from_yaw
 
 __all__ = ["clip_from_description", "contact_schedule", "foot_trajectory", "trunk_height", "trunk_sway"]
 
+_CROSSING_MARGIN = 0.02  # m, a foot's radius: how near a foot may come to the trunk midline or the other leg's hip
+# of its side (choice)
 _REACH_TOLERANCE = 1e-6  # m: IK solutions whose feet miss their targets by more than this are out of reach
 _GRAVITY = 9.81  # m/s^2: MuJoCo's default gravity, which the A1 model keeps
 _SWAY_SAMPLES = 512  # points per cycle at which the sway's periodic boundary problem is solved
@@ -157,7 +166,8 @@ def _support_centre(desc: GaitDescription, phase: np.ndarray, stance: np.ndarray
     runs at the trunk's x (a diagonal pair's line crosses under the trunk only at mid-stance; the trot's lies up to
     11 cm to one side at touchdown and to the other at lift-off), else the mean of the stance feet's neutral y
     (one, three or four feet; two whose line runs sideways under the trunk; 0 in flight)."""
-    feet_x, feet_y = _stance_x(desc, phase), _neutral_feet(desc)[:, 1]
+    feet = _stance_feet(desc, phase)
+    feet_x, feet_y = feet[..., 0], feet[..., 1]
     count = stance.sum(-1)
     centre = (stance * feet_y).sum(-1) / np.maximum(count, 1)
     rank = np.cumsum(stance, axis=-1) * stance  # 1 at the first stance foot, 2 at the second, 0 at the others
@@ -169,11 +179,62 @@ def _support_centre(desc: GaitDescription, phase: np.ndarray, stance: np.ndarray
     return np.where(line, first_y + along * (second_y - first_y), centre)
 
 
-def _stance_x(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
-    """(..., 4) trunk-frame x of each foot over its stance stroke (from ``+d/2`` to ``-d/2`` about its neutral
-    point; the values at swinging legs are not used), m."""
-    psi = _leg_phase(desc, phase)
-    return _neutral_feet(desc)[:, 0] + desc.duty_factor * desc.stride_length * (0.5 - psi / desc.duty_factor)
+def _stance_feet(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
+    """(..., 4, 2) trunk-frame x and y of each foot over its stance stroke (the values at swinging legs are not
+    used), m."""
+    return _neutral_feet(desc)[:, :2] + _stroke(desc, _leg_phase(desc, phase))
+
+
+def _step(desc: GaitDescription) -> np.ndarray:
+    """(2,) trunk displacement per cycle along its own x and y of a gait without yaw rate, m."""
+    return np.array([desc.forward_speed, desc.lateral_speed]) / desc.stride_frequency
+
+
+def _stroke(desc: GaitDescription, psi: np.ndarray) -> np.ndarray:
+    """(..., 4, 2) stance foot offset from its neutral point at leg phases ``psi`` (..., 4) in [0, duty), trunk
+    frame, m: a straight stroke from ``+D/2`` to ``-D/2``, or, with a yaw rate, the arc about the centre of rotation
+    that passes the neutral point at mid-stance (see the module docstring)."""
+    duty = desc.duty_factor
+    if desc.yaw_rate == 0.0:
+        return duty * _step(desc) * (0.5 - psi / duty)[..., None]
+    w = desc.yaw_rate
+    centre = np.array([-desc.lateral_speed, desc.forward_speed]) / w
+    arm = _neutral_feet(desc)[:, :2] - centre  # (4, 2) from the centre of rotation to each neutral point
+    return _rotate(arm, -w * (psi - 0.5 * duty) * desc.period) - arm
+
+
+def _rotate(vectors: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """(..., 2) ``vectors`` turned by ``angle`` (...) rad, counter-clockwise."""
+    cos, sin = np.cos(angle), np.sin(angle)
+    x, y = vectors[..., 0], vectors[..., 1]
+    return np.stack([cos * x - sin * y, sin * x + cos * y], axis=-1)
+
+
+def _trunk_path(desc: GaitDescription, time: np.ndarray) -> np.ndarray:
+    """(..., 2) where the trunk of a gait with a yaw rate is after ``time`` (...) s, in the ground frame it started
+    in, m (without sway): an arc of the circle about its centre of rotation."""
+    w, v = desc.yaw_rate, np.array([desc.forward_speed, desc.lateral_speed])
+    angle = w * np.asarray(time)
+    sin, one_minus_cos = np.sin(angle) / w, (1.0 - np.cos(angle)) / w
+    return np.stack([sin * v[0] - one_minus_cos * v[1], one_minus_cos * v[0] + sin * v[1]], axis=-1)
+
+
+def _swing(desc: GaitDescription, s: np.ndarray) -> np.ndarray:
+    """(..., 4, 2) swinging foot offset from its neutral point at swing progress ``s`` (..., 4) in [0, 1], trunk
+    frame, m: from the lift-off to the touchdown point along a cycloid in the world (see the module docstring)."""
+    duty, swing_fraction = desc.duty_factor, 1.0 - desc.duty_factor
+    cycloid = (s - np.sin(2.0 * np.pi * s) / (2.0 * np.pi))[..., None]
+    if desc.yaw_rate == 0.0:  # world-frame cycloid minus the trunk's own advance, from the back of the stroke
+        step = _step(desc)
+        return -0.5 * (duty * step) + step * cycloid - swing_fraction * step * s[..., None]
+    lift_off, touchdown = _stroke(desc, np.full(4, duty)), _stroke(desc, np.zeros(4))
+    neutral = _neutral_feet(desc)[:, :2]
+    # In the trunk frame at lift-off: where the foot lands, and where the trunk is (and how turned) meanwhile.
+    swing_time = swing_fraction * desc.period
+    landing = _trunk_path(desc, swing_time) + _rotate(neutral + touchdown, desc.yaw_rate * swing_time)
+    foot = neutral + lift_off + (landing - neutral - lift_off) * cycloid
+    elapsed = s * swing_time
+    return _rotate(foot - _trunk_path(desc, elapsed), -desc.yaw_rate * elapsed) - neutral
 
 
 def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
@@ -188,19 +249,15 @@ def foot_trajectory(desc: GaitDescription, phase: np.ndarray) -> np.ndarray:
     """
     psi = _leg_phase(desc, phase)
     duty = desc.duty_factor
-    stride = desc.stride_length
-    stance_travel = duty * stride
     in_stance = psi < duty
     swing_fraction = 1.0 - duty
     s = np.clip((psi - duty) / swing_fraction, 0.0, 1.0) if swing_fraction > 0.0 else np.zeros_like(psi)
-    angle = 2.0 * np.pi * s
-    # World-frame cycloid minus the trunk's own advance during the swing, from the back of the stance stroke.
-    swing_x = -0.5 * stance_travel + stride * (s - np.sin(angle) / (2.0 * np.pi)) - swing_fraction * stride * s
-    lift = desc.swing_height * 0.5 * (1.0 - np.cos(angle))
+    lift = desc.swing_height * 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
 
     neutral = _neutral_feet(desc)
-    x = np.where(in_stance, _stance_x(desc, phase), neutral[:, 0] + swing_x)
-    y = neutral[:, 1] - trunk_sway(desc, phase)[..., None]
+    offset = np.where(in_stance[..., None], _stroke(desc, psi), _swing(desc, s))
+    x = neutral[:, 0] + offset[..., 0]
+    y = neutral[:, 1] + offset[..., 1] - trunk_sway(desc, phase)[..., None]
     z = FOOT_RADIUS - trunk_height(desc, phase)[..., None] + np.where(in_stance, 0.0, lift)
     return np.stack([x, y, z], axis=-1)
 
@@ -209,16 +266,19 @@ def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -
     """One looping cycle of ``desc`` as a reference clip, through the A1's leg inverse kinematics.
 
     The cycle is stored at about ``frame_rate`` frames per second (rounded to a whole number of frames per
-    cycle, at least 16); the trunk starts at x = 0 and advances one stride length per cycle.
+    cycle, at least 16); the trunk starts at x = 0 facing x, advances one stride per cycle and turns by the
+    description's :attr:`~gaitlib.gaits.GaitDescription.cycle_yaw`.
 
     Raises:
         GaitError: a foot target is out of the leg's reach or needs a joint beyond its limits (e.g. the body
-            height or stride is too large).
+            height, stride or turn is too large), or a foot crosses under the trunk into another leg's room
+            (the trunk midline, or the other foot of its side fore and aft).
     """
     intervals = max(16, round(desc.period * frame_rate))
     phase = np.arange(intervals + 1) / intervals
     feet = foot_trajectory(desc, phase)
     feet[-1] = feet[0]  # the last frame closes the loop exactly
+    _check_feet_apart(desc, feet)
     joint_pos = inverse_kinematics(feet)
     miss = np.abs(forward_kinematics(joint_pos) - feet).max()
     if miss > _REACH_TOLERANCE:
@@ -227,11 +287,15 @@ def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -
     if outside.any():
         raise GaitError(f"gait '{desc.name}': the foot trajectories need joint angles beyond the A1's limits")
     root_pos = np.zeros((intervals + 1, 3))
-    root_pos[:, 0] = desc.stride_length * phase
-    root_pos[:, 1] = trunk_sway(desc, phase)
+    if desc.yaw_rate == 0.0:
+        root_pos[:, 0] = desc.stride_length * phase
+        root_pos[:, 1] = desc.lateral_speed / desc.stride_frequency * phase + trunk_sway(desc, phase)
+    else:  # the sway is along the turning trunk's own y axis
+        yaw, sway = desc.cycle_yaw * phase, trunk_sway(desc, phase)
+        left = np.stack([-np.sin(yaw), np.cos(yaw)], axis=-1)  # the trunk's y axis on the ground
+        root_pos[:, :2] = _trunk_path(desc, phase * desc.period) + left * sway[:, None]
     root_pos[:, 2] = trunk_height(desc, phase)
-    root_quat = np.zeros((intervals + 1, 4))
-    root_quat[:, 0] = 1.0
+    root_quat = quat_from_yaw(desc.cycle_yaw * phase)
     return ReferenceClip.from_frames(
         name=desc.name,
         frame_duration=desc.period / intervals,
@@ -240,5 +304,29 @@ def clip_from_description(desc: GaitDescription, *, frame_rate: float = 500.0) -
         root_quat=root_quat,
         joint_pos=joint_pos,
         contact=contact_schedule(desc, phase),
-        cycle_displacement=np.array([desc.stride_length, 0.0, 0.0]),
+        cycle_displacement=np.append(root_pos[-1, :2] - root_pos[0, :2], 0.0),
+        cycle_yaw=desc.cycle_yaw,
     )
+
+
+def _check_feet_apart(desc: GaitDescription, feet: np.ndarray) -> None:
+    """Refuse planned feet (frames, 4, 3) in the trunk frame that cross the trunk midline, or reach fore or aft
+    past the hip of the other leg of their side, with :data:`_CROSSING_MARGIN` to spare: a turn or sidestep too
+    fast for its stride sweeps a foot into another leg's room (the legs would collide; the IK alone does not see
+    it). A fast trot's front and hind feet of a side pass close by each other as the hind foot lands where the
+    front one lifted, as an animal's do (the shipped trot's come within 1.5 cm), so that is not refused."""
+    hips = np.asarray(HIP_OFFSETS)
+    side = np.sign(np.asarray(THIGH_OFFSET_Y))  # +1 left legs, -1 right legs
+    inward = (side * feet[..., 1]).min()
+    if inward < _CROSSING_MARGIN:
+        raise GaitError(
+            f"gait '{desc.name}': a foot comes {_CROSSING_MARGIN - inward:.3f} m too near or past the trunk midline "
+            "(its feet cannot carry this turn or sidestep at this stride: slow it, or step more often)"
+        )
+    ahead = np.sign(hips[:, 0])  # +1 front legs, -1 rear legs
+    reach = (ahead * feet[..., 0]).min() + hips[:, 0].max()  # how far the nearest foot stays short of the other hip
+    if reach < _CROSSING_MARGIN:
+        raise GaitError(
+            f"gait '{desc.name}': a foot reaches {_CROSSING_MARGIN - reach:.3f} m too near or past the hip of the "
+            "other leg of its side (its feet cannot carry this motion at this stride: slow it, or step more often)"
+        )

@@ -188,8 +188,15 @@ def _reference_facts(clip: ReferenceClip, control_dt: float, cfg: obs_fn.Observa
         "columns": _segments(obs_fn.REFERENCE_FRAME),
         "rows": rows.tolist(),
     }
-    if cfg.heading:  # the reference trunk's own yaw at each row, rad (0 for a gait built from a description)
+    if cfg.heading:  # the reference trunk's own yaw at each row, rad (0 for a straight gait built from a description)
         facts["yaw"] = yaw_of(clip.frame(phases).root_quat).double().numpy().round(_DECIMALS).tolist()
+        if clip.cycle_yaw != 0.0:  # a turning reference: its yaw grows from cycle to cycle
+            facts["cycle_yaw"] = {
+                "value": clip.cycle_yaw,
+                "units": "rad",
+                "meaning": "the reference turns this much per cycle: reference yaw(phase) is the yaw column read at "
+                "the fractional part of the phase plus floor(phase) times this",
+            }
     start = torch.cat([frame.root_quat, frame.root_lin_vel, frame.root_ang_vel, frame.joint_vel], dim=1)
     facts["start_state"] = {
         "meaning": "where training starts a robot at the phase of each row (reference state initialization), facing "
