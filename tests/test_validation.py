@@ -1,6 +1,6 @@
 """Every file gaitlib reads is validated by schema, not only by its checksum: an edited route table, handover-states
 file, entry metadata or benchmark result with its checksum kept valid is refused in one line naming the file and the
-field, and the shipped libraries still load (benchmarks/byte_flips.py --edits fuzzes the same readers)."""
+field, and the shipped libraries still load (tests/fuzz/byte_flips.py --edits fuzzes the same readers)."""
 
 from __future__ import annotations
 

@@ -170,7 +170,9 @@ def _measure_again(library: Library, saved: Mapping) -> str:
     words = ["gaitlib", "routes", "--library", library.root, "--strategy", saved["strategy"], "--push",
              f"{saved['push_n']:g}", "--max-legs", saved["max_legs"], "--samples", measured["samples"], "--worlds",
              measured["num_worlds"], "--seed", measured["seed"], "--falls", measured.get("falls", "contact")]
-    return " ".join(shlex.quote(str(w)) for w in words + (["--replace"] if is_shipped(library.root) else []))
+    if is_shipped(library.root):
+        words.append("--replace")
+    return " ".join(shlex.quote(str(w)) for w in words)
 
 
 def check_routes(saved: Mapping, *, path: Path, strategies: Sequence[str], again: str = "") -> None:

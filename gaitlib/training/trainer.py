@@ -38,7 +38,7 @@ from gaitlib.training.recipe import Recipe
 from gaitlib.training.switch_start import handover_states
 from gaitlib.training.target import check_target
 
-__all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "train_gait"]
+__all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "resume_point", "train_gait"]
 
 _CURVE_ROWS = 60
 """About how many learning-curve rows the entry's metadata keeps (the last one always)."""
@@ -247,7 +247,7 @@ def train_gait(
     states = handover_states(request.states, request.switch_start, gait=request.description.name)  # before any file
     ranks = Ranks.from_env()
     if not ranks.main:
-        return _train(request, ranks, on_iteration, states, _resume_point(request))
+        return _train(request, ranks, on_iteration, states, resume_point(request))
     lock = request.run_dir / ".run.lock"
     fd = take_lock(lock, writing=f"training run folder {request.run_dir}", error=GaitlibError)
     try:
@@ -258,12 +258,12 @@ def train_gait(
                 f"{request.run_dir} belongs to another training run (it holds {latest}); continue that run with "
                 f"--resume and the inputs it was started with, or {start_over(latest)}"
             )
-        return _train(request, ranks, on_iteration, states, _resume_point(request))
+        return _train(request, ranks, on_iteration, states, resume_point(request))
     finally:
         release_lock(lock, fd)
 
 
-def _resume_point(request: TrainRequest) -> dict | None:
+def resume_point(request: TrainRequest) -> dict | None:
     """With ``request.resume``: the run's latest checkpoint, read and shown to be of this very run (every input the
     same: :func:`~gaitlib.training.checkpoint.check_same_run`) before any simulation is built; else ``None``."""
     if not request.resume:

@@ -11,6 +11,10 @@ the file is read as the commands read it, and the outcome is counted:
 - ``different``: accepted with a different result: a silent wrong answer, the count that must be 0;
 - ``crashed``: another exception (a traceback instead of one line).
 
+The identity kinds (:mod:`identity_kinds`) flip bytes of what a resumed training run reads (its gait file, its
+states file: the resume must be refused unless nothing it reads changed) and of a copy of the transition file read
+beside the original (every sample counted once, or the copy refused).
+
 Then, ``--edits`` times for the route table, the handover states, an entry's metadata and the benchmark results:
 a *structured edit* that keeps the file parseable and its checksum valid (recomputed) but puts in wrong content (a
 wrong type, a value out of range, a missing key, extra nesting, a nan or an infinity as Python's json writes them,
@@ -20,9 +24,13 @@ gaitlib's real reader and used as its command uses it, in process, and the outco
 or ``crashed`` (another exception, or a refusal of more than one line). About half the edits of a kind are edits of
 meaning written for it (all of them from twice their number on), the rest generic edits of random fields; a kind's
 controls (its keys in another order; the route table's derived detours left out) change nothing read and must come
-out harmless.
+out harmless. Two identity kinds follow (:mod:`identity_kinds`): ``resume identity``, structured edits of the gait
+file a run was started from, each read by the run's resume (refused, unless the description read is the same), and
+``data overlap``, a transition file's samples given to a fit a second time in another guise (a link, a copy, a
+subset, a collection with the same seed, ...), where every outcome but ``harmless`` (each sample counted once) is
+a failure.
 
-Usage: python benchmarks/byte_flips.py [--flips 100] [--edits 100] [--seed 0]; prints one JSON line per kind of
+Usage: python tests/fuzz/byte_flips.py [--flips 100] [--edits 100] [--seed 0]; prints one JSON line per kind of
 file and per kind of edited file, and exits non-zero if any flip or edit was accepted with a different result or
 crashed. ``--flips 0`` or ``--edits 0`` (the default) skips that part.
 """
@@ -34,6 +42,7 @@ import dataclasses
 import hashlib
 import json
 import random
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable
@@ -41,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from identity_kinds import overlap, resume_reader, resume_target, start_resumable_run
 from structured_edits import edit, edit_targets
 from tensordict import TensorDict
 
@@ -50,6 +60,7 @@ from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
+from gaitlib import gaits
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library
 from gaitlib.meta import TrialProtocol, load_switching
@@ -70,10 +81,15 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         train_gait(TrainRequest(description=get_gait(gait), preset=get_preset("tiny"), iterations=1, library=library,
                                 run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=1, eval_seconds=0.3))
     data = root / "t.h5"
-    collect(data, library=Library(library), config=CollectConfig(
+    collect_config = CollectConfig(
         samples=24, num_worlds=4, push_max=400.0, backend="mujoco", chunk=24,
-        protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3)))
-    fit_library(Library(library), read(data), sources=[data], epochs=2)
+        protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3))
+    collect(data, library=Library(library), config=collect_config)
+    fit_library(Library(library), read(data), sources=[data], epochs=2, min_per_label=0)  # too few to validate
+    collect(root / "same-seed.h5", library=Library(library), config=collect_config)  # the same samples again
+    copy = root / "copy.h5"
+    shutil.copy2(data, copy)
+    shutil.copytree(schema.parts_folder(data), schema.parts_folder(copy))
     out = root / "bench"
     run_sweep(out, load_switching(library), SweepConfig(
         strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, backend="mujoco",
@@ -86,6 +102,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, backend="mujoco",
         protocol=TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2)))
     routes_from_results(both, Library(library), strategy="random").save(Library(library))
+    start_resumable_run(root, Path(gaits.__file__).parent / "descriptions" / "stand.toml")  # the shipped stand
     probe = TensorDict({"policy": torch.linspace(-1, 1, 159).unsqueeze(0)}, batch_size=[1])
 
     def entry() -> object:
@@ -104,6 +121,9 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
     def transitions() -> object:
         return read_all([data]).samples.columns(), read(data).header
 
+    def overlapping() -> object:
+        return read_all([data, copy]).samples.columns()
+
     part = next(schema.parts_folder(data).glob("part-*.h5"))
     switching_dir = library / "switching"
     return {
@@ -119,6 +139,10 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         "transition part": (part, transitions),
         "benchmark results.json": (out / "results.json", lambda: load_results(out)),
         "handover states": (states, lambda: dataclasses.asdict(load_states(states)[0])),
+        "resume: its gait file": (root / "stand.toml", resume_reader(root)),
+        "resume: its states file": (states, resume_reader(root)),
+        "data overlap: a copy's index": (copy, overlapping),
+        "data overlap: a copy's part": (next(schema.parts_folder(copy).glob("part-*.h5")), overlapping),
     }
 
 
@@ -177,10 +201,15 @@ def main() -> None:
                 print(json.dumps({"file": kind, "bytes": path.stat().st_size, "flips": args.flips, **counts}),
                       flush=True)
         if args.edits:
-            for kind, target in edit_targets(root, GAITS).items():
+            targets = edit_targets(root, GAITS) | {"resume identity": resume_target(root)}
+            for kind, target in targets.items():
                 line = edit(target, args.edits, random.Random(f"{args.seed}-{kind}"), same)
                 bad += line["wrong"] + line["crashed"]
                 print(json.dumps({"edits": kind, **line}), flush=True)
+            line = overlap(root / "t.h5", root / "same-seed.h5", root, args.edits,
+                           random.Random(f"{args.seed}-data overlap"), same)
+            bad += line["wrong"] + line["crashed"] + line["refused"]
+            print(json.dumps({"edits": "data overlap", **line}), flush=True)
     sys.exit(1 if bad else 0)
 
 

@@ -1,4 +1,4 @@
-"""Structured edits for benchmarks/byte_flips.py (``--edits N``; the command, its output and its exit status are
+"""Structured edits for tests/fuzz/byte_flips.py (``--edits N``; the command, its output and its exit status are
 described there): wrong content put into a file gaitlib reads, the file kept parseable and its checksum valid.
 
 A structured edit loads a file as data, changes it in place and writes it back with its checksum recomputed, so that
