@@ -17,9 +17,11 @@ import torch
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.randomization import RandomizationConfig, sample_world_parameters
-from gaitlib.gaits import GaitDescription, clip_from_description
+from gaitlib.gaits import GaitDescription, clip_from_description, get_gait
 from gaitlib.library.deployment import deployment_block
+from gaitlib.library.export import export_onnx
 from gaitlib.library.layout import shipped_library_dir
+from gaitlib.library.policy import build_models
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
 
@@ -142,3 +144,42 @@ def test_the_block_states_where_training_starts_a_robot_and_the_delay_it_trained
     np.testing.assert_allclose(row["root_ang_vel"], s.root_ang_vel[0].numpy(), atol=1e-5)
     np.testing.assert_allclose(row["joint_vel"], s.joint_vel[0].numpy(), atol=1e-5)
     assert deployment["action"]["delay"]["trained_steps"] == [0, 1]
+
+
+def test_the_loop_follows_a_turning_reference_across_its_cycles(tmp_path) -> None:
+    """A turning gait's block gives its turn per cycle, and the loop's observations, the heading error included,
+    equal the environment's for 24 control steps (0.8 s): 1.6 cycles of turn_left, across a seam where the reference has
+    turned on (a policy whose actions are all 0, so the robot holds the reference's joint targets; only the
+    observations are compared)."""
+    meta = json.loads((shipped_library_dir() / "trot" / "metadata.json").read_text())
+    turn = get_gait("turn_left")
+    clip = clip_from_description(turn)
+    entry = tmp_path / "turn_left"
+    entry.mkdir()
+    actor, _ = build_models(actor_hidden=(8,), critic_hidden=(8,), activation="elu", num_actions=12,
+                            observation=obs_fn.ObservationConfig())
+    with torch.no_grad():
+        for parameter in actor.parameters():
+            parameter.zero_()
+    export_onnx(actor, entry / "policy.onnx")
+    block = deployment_block(clip=clip, action=meta["action"], observation=obs_fn.ObservationConfig(),
+                             onnx_path=entry / "policy.onnx", action_delay_steps=(0, 0))
+    assert block["reference"]["cycle_yaw"]["value"] == pytest.approx(turn.cycle_yaw)
+    (entry / "metadata.json").write_text(json.dumps({"deployment": block}))
+    sim = make_backend("mujoco", num_worlds=1)
+    cfg = EnvConfig(episode_seconds=100.0, randomization=RandomizationConfig(enabled=False), random_start_phase=False)
+    env = ImitationEnv(sim, [clip], cfg)
+    try:
+        s = env.sim_state
+        model = mujoco.MjModel.from_xml_path(str(get_robot("a1").mjcf_path))
+        data = mujoco.MjData(model)
+        data.qpos[:] = torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).double().numpy()
+        data.qvel[:] = torch.cat([s.root_lin_vel[0], s.root_ang_vel[0], s.joint_vel[0]]).double().numpy()
+        for step, (obs, action) in enumerate(_load_example().deploy(model, data, entry, 0.8)):
+            expected = env.get_observations()["policy"][0].numpy()
+            np.testing.assert_allclose(obs, expected, atol=1e-4, err_msg=f"control step {step}")
+            assert not env.step(torch.as_tensor(action, dtype=torch.float32).unsqueeze(0))[2].any()
+        assert step + 1 == 24 and env.reference.phase[0].item() > 1.5 and not action.any()
+        assert abs(obs[-1]) > 0.1  # the robot turns less than the reference: a heading error both read alike
+    finally:
+        sim.close()
