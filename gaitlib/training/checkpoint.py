@@ -14,7 +14,6 @@ remove the checkpoint to start over in this one.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -39,7 +38,7 @@ def run_identity(request) -> dict:
     :data:`IDENTITY_KEYS` of its run record. The states file is hashed as it is read, in blocks."""
     return {
         "gait": request.description.name,
-        "description": _plain(dataclasses.asdict(request.description)),
+        "description": _plain(request.description.record()),
         "states_sha256": None if request.states is None else file_sha256(request.states),
         "preset": request.preset.name,
         "recipe": request.recipe.as_dict(),
