@@ -17,7 +17,7 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
-from gaitlib.defaults import SWITCH_START
+from gaitlib.defaults import SWITCH_START, Falls
 from gaitlib.gaits import get_gait
 from gaitlib.training import get_preset
 from gaitlib.training.recipe import PAPER_RECIPE, Recipe
@@ -26,7 +26,7 @@ from gaitlib.training.trainer import TrainRequest, train_gait
 VARIANTS = {
     "today": PAPER_RECIPE,
     "kick": replace(PAPER_RECIPE, push_kind="kick", kick_max=1.0, kick_draw="disk", kick_interval=(1.0, 3.0)),
-    "trunk": replace(PAPER_RECIPE, terminate="trunk", contact_penalty=1.0),
+    "trunk": replace(PAPER_RECIPE, falls=Falls.TRUNK, contact_penalty=1.0),
     "gamma": replace(PAPER_RECIPE, gamma=0.99, lam=0.95),
     "critic-delay": replace(PAPER_RECIPE, critic_delay=True),
     "robust": Recipe(),

@@ -3,9 +3,11 @@ can show them in ``--help`` without importing torch."""
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "FALL_DEFINITIONS",
-    "MIN_PER_LABEL", "SWITCH_START",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "MIN_PER_LABEL",
+    "SWITCH_START", "Falls",
 ]
 
 COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
@@ -14,11 +16,23 @@ COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
 DEFAULT_STRATEGY = "net-lookahead"
 """The strategy ``gaitlib run`` and :func:`gaitlib.meta.run_episode` switch with by default: the best measured on
 the shipped library (``docs/results.md``); ``net`` is the paper's rule."""
-FALL_DEFINITIONS = ("trunk", "contact")
-"""The definitions of a fall (:mod:`gaitlib.envs.terminations`): ``trunk``, the field's (the trunk too low, tilted
-past the limit or on the ground, as legged_gym's and Isaac Lab's A1 tasks count one; a leg's touch ridden through is
-a *touch*, reported beside), and ``contact``, gaitlib's strict one (any non-foot body on the ground is a fall too)."""
-DEFAULT_FALLS = "trunk"
+
+
+class Falls(StrEnum):
+    """What a fall is (:mod:`gaitlib.envs.terminations`; one helper builds the terminations from it,
+    :meth:`~gaitlib.envs.terminations.TerminationConfig.counting`). A value of this type is one of the two
+    definitions and nothing else: the command line makes it from ``--falls`` (``train``: ``--terminate``), refusing
+    any other text in one line, and a stored file's reader from the text the file recorded (``"trunk"`` or
+    ``"contact"``, the values it writes back)."""
+
+    TRUNK = "trunk"
+    """The field's: the trunk too low, tilted past the limit or on the ground, as legged_gym's and Isaac Lab's A1
+    tasks count one; a leg's touch ridden through is a *touch*, reported beside."""
+    CONTACT = "contact"
+    """gaitlib's strict one: any non-foot body on the ground is a fall too."""
+
+
+DEFAULT_FALLS = Falls.TRUNK
 """The definition every report, label and artefact uses unless told otherwise."""
 SWITCH_START = 0.4
 """The share of training episodes that start from another gait's handover state when ``--states`` is given: most

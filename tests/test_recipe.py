@@ -11,6 +11,7 @@ import pytest
 import torch
 from cli_runner import gaitlib_quick
 
+from gaitlib.defaults import Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.randomization import PushConfig, PushSchedule
@@ -73,17 +74,17 @@ def test_a_recipe_recorded_before_the_kick_draw_and_cycle_sync_existed_reads_as_
     recorded = {"push_kind": "kick", "kick_max": 1.0, "kick_interval": [1.0, 3.0], "terminate": "contact",
                 "contact_penalty": 0.0, "gamma": None, "lam": None, "action_delay": None, "critic_delay": False}
     assert Recipe.from_record(recorded) == dataclasses.replace(PAPER_RECIPE, push_kind="kick", kick_draw="disk")
-    recipe = Recipe(push_kind="kick", terminate="trunk", contact_penalty=1.0, cycle_sync=True)
+    recipe = Recipe(push_kind="kick", falls=Falls.TRUNK, contact_penalty=1.0, cycle_sync=True)
     assert Recipe.from_record(json.loads(json.dumps(recipe.as_dict()))) == recipe
 
 
 def test_trunk_only_terminations_ride_a_touch_through_and_the_penalty_costs_reward() -> None:
     clip = clip_from_description(get_gait("stand"))
     rewards = {}
-    for terminate, penalty in (("contact", 0.0), ("trunk", 0.0), ("trunk", 0.5)):
+    for terminate, penalty in ((Falls.CONTACT, 0.0), (Falls.TRUNK, 0.0), (Falls.TRUNK, 0.5)):
         sim = make_backend("mujoco", num_worlds=1)
         try:
-            recipe = Recipe(terminate=terminate, contact_penalty=penalty, action_delay=0)
+            recipe = Recipe(falls=terminate, contact_penalty=penalty, action_delay=0)
             cfg = recipe.env_config(EnvConfig(episode_seconds=5.0), control_dt=sim.control_dt)
             cfg = dataclasses.replace(cfg, randomization=dataclasses.replace(cfg.randomization, enabled=False))
             env = ImitationEnv(sim, [clip], cfg, seed=0)
@@ -182,7 +183,6 @@ def test_the_defaults_are_the_shipped_librarys_recipe(tmp_path) -> None:
     ("fields", "line"),
     [
         ({"push_kind": "shove"}, "--push-kind takes force or kick, got 'shove'"),
-        ({"terminate": "legs"}, "--terminate takes trunk or contact, got 'legs'"),
         ({"kick_draw": "ring"}, "--kick-draw takes disk or axes, got 'ring'"),
         ({"kick_interval": (3.0, 1.0)}, "--kick-interval LOW:HIGH with 0 < LOW <= HIGH <= 60 s"),
         ({"contact_penalty": -1.0}, "--contact-penalty must lie in [0, 10] per step, got -1"),

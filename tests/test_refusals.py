@@ -234,3 +234,20 @@ def test_ray_options_are_refused_in_one_line_without_ray_or_without_each_other(c
              "--workers needs --ray (without it the job runs in this process)")
     _refused(gaitlib_quick(command, "auto", *out), "unexpected argument 'auto' (a Ray address goes after --ray)")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["train", "stand", "--terminate", "legs"], "--terminate takes trunk or contact, got 'legs'"),
+        (["eval", "stand", "--falls", "legs"], "--falls takes trunk or contact, got 'legs'"),
+        (["benchmark", "--falls", "Trunk"], "--falls takes trunk or contact, got 'Trunk'"),
+    ],
+)
+def test_a_definition_of_a_fall_other_than_trunk_or_contact_is_refused_while_parsing(args, line, tmp_path) -> None:
+    """What a fall is, is checked once, as the command line is parsed; below it the definition is a
+    :class:`gaitlib.defaults.Falls`, which holds no other."""
+    outputs = {"benchmark": ["--out", str(tmp_path / "bench")],
+               "train": ["--library", str(tmp_path / "lib"), "--run-dir", str(tmp_path / "runs")]}.get(args[0], [])
+    _refused(gaitlib_quick(*args, *outputs), line)
+    assert list(tmp_path.iterdir()) == []

@@ -18,6 +18,7 @@ from benchmarks.results import doc as tables
 from benchmarks.results import robustness
 from benchmarks.results import switches as switching
 from benchmarks.results.evidence import pct
+from gaitlib.defaults import Falls
 from gaitlib.stats import wilson_interval
 from gaitlib.strategies.fitting import PAPER_PAIRS
 from gaitlib.training.recipe import PAPER_RECIPE
@@ -314,7 +315,7 @@ def test_the_gaits_robustness_from_small_ablation_rows(tmp_path: Path, evidence:
     # a variant of the pace: its row after today's, its recipe as the train options that set it apart
     kick = _ablation("pace", ("trot", "stand"), shove=dict.fromkeys(("front", "left", "back", "right"), 0), push=0,
                      zero=0, late=0, minutes=50.2)
-    kick["recipe"] = dataclasses.replace(PAPER_RECIPE, push_kind="kick", terminate="trunk", contact_penalty=1.0,
+    kick["recipe"] = dataclasses.replace(PAPER_RECIPE, push_kind="kick", falls=Falls.TRUNK, contact_penalty=1.0,
                                          gamma=0.99).as_dict()  # today's recipe, four levers changed
     (folder / "pace-kick.json").write_text(json.dumps({"command": "python benchmarks/robust_ablation.py --gait pace",
                                                         "result": kick}))

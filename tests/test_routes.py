@@ -12,6 +12,7 @@ from cli_runner import gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.benchmark.sweep import CellSchedule, SweepConfig, run_sweep
+from gaitlib.defaults import Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.library.store import Library
@@ -137,9 +138,7 @@ def test_a_routed_sweep_records_its_routes_and_resumes_only_with_them(tmp_path) 
         run_sweep(tmp_path / "bench", setup, dataclasses.replace(config, routes={}))
     with pytest.raises(GaitlibError, match="does not lead from one gait to another as trot-pace"):
         dataclasses.replace(config, routes={"trot-pace": ("trot", "stand")})
-    with pytest.raises(GaitlibError, match="falls 'legs': trunk or contact"):
-        dataclasses.replace(config, falls="legs")
-    strict = run_sweep(tmp_path / "strict", setup, dataclasses.replace(config, falls="contact"))
+    strict = run_sweep(tmp_path / "strict", setup, dataclasses.replace(config, falls=Falls.CONTACT))
     assert strict["settings"]["falls"] == "contact" and results["settings"]["falls"] == "trunk"  # the default
     cell = strict["groups"]["random@0"]["cells"]["trot-pace"]
     assert cell["samples"] == 3 and 0 <= cell["touched"] <= 3 and cell["longest_touch_s"] >= 0

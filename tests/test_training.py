@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from gaitlib.atomic import write_json
+from gaitlib.defaults import Falls
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library, LibraryError
 from gaitlib.training import get_preset
@@ -224,7 +225,7 @@ def test_eval_counts_each_fall_under_the_terminations_it_met() -> None:
     trot = library.entry("trot")
     result = evaluate_policy(  # pushes far beyond what the trot rides out: most episodes fall, strictly counted
         trot.policy, trot.clip, env_cfg=library.shared_policy_settings(["trot"]).env_config(EnvConfig()),
-        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, falls="contact", seed=0,
+        episodes=8, seconds=2.0, backend="mujoco", push_max=1500.0, falls=Falls.CONTACT, seed=0,
     )
     falls = round(result.fall_rate * result.episodes)
     causes = result.falls_by_cause

@@ -137,8 +137,9 @@ def readme_recipe(readme: Path) -> Recipe:
     pairs = zip(tokens[::2], tokens[1::2], strict=True)
     options = {key.removeprefix("--").replace("-", "_"): value for key, value in pairs}
     low, high = options.pop("kick_interval").split(":")
-    words = {key: options.pop(key) for key in ("push_kind", "kick_draw", "terminate")}
-    return Recipe(**words, kick_interval=(float(low), float(high)), **{k: float(v) for k, v in options.items()})
+    words = {key: options.pop(key) for key in ("push_kind", "kick_draw", "terminate")}  # as an entry records them
+    return Recipe.from_record(words | {"kick_interval": [float(low), float(high)]}
+                              | {k: float(v) for k, v in options.items()})
 
 
 def test_the_shipped_library_is_the_recipe_and_the_table_its_readme_gives() -> None:
@@ -159,7 +160,7 @@ def test_the_shipped_library_is_the_recipe_and_the_table_its_readme_gives() -> N
     assert stored == json.loads((lib.switching_dir / "routes.json").read_text())
     recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
     identities = lib.identities()
-    assert recipe.push_kind == "kick" and recipe.terminate == "trunk"
+    assert recipe.push_kind == "kick" and recipe.falls == "trunk"
     for gait in lib.gaits():
         metadata = json.loads((lib.root / gait / "metadata.json").read_text())
         assert Recipe.from_record(metadata["training"]["recipe"]) == recipe, gait

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import null_for_nan, save_figure, write_json
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import observations as obs_fn
 from gaitlib.robots.a1.constants import LEG_NAMES
 from gaitlib.stats import wilson_interval
@@ -77,7 +77,7 @@ class PairMap:
         return max(filled, key=lambda r: r.rate), min(filled, key=lambda r: r.rate)
 
 
-def transition_maps(data: TransitionData, *, bins: int = 10, falls: str = DEFAULT_FALLS) -> list[PairMap]:
+def transition_maps(data: TransitionData, *, bins: int = 10, falls: Falls = DEFAULT_FALLS) -> list[PairMap]:
     """The map of every ordered pair present in ``data``, in the file's pair order (source, then destination), a
     success being no fall by the definition ``falls``."""
     s = data.labelled(falls).samples
@@ -125,7 +125,7 @@ def fall_time_quantile(maps: list[PairMap], q: float = 0.99) -> float | None:
     return float(np.quantile(times, q)) if times else None
 
 
-def write_map_json(maps: list[PairMap], path: Path, *, source: str, falls: str) -> Path:
+def write_map_json(maps: list[PairMap], path: Path, *, source: str, falls: Falls) -> Path:
     """Write the maps (with the 99% fall time, the definition of a fall and the file they were read from) as JSON,
     atomically."""
     body = {

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, replace
 
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import FallTally
@@ -60,8 +60,8 @@ class PushPoint:
     """Wilson 95% interval of ``touches / episodes``."""
     longest_touch_s: float
     """The longest unbroken touch over the episodes, s."""
-    falls_definition: str = DEFAULT_FALLS
-    """What a fall was (``trunk`` or ``contact``, :data:`gaitlib.defaults.FALL_DEFINITIONS`)."""
+    falls_definition: Falls = DEFAULT_FALLS
+    """What a fall was."""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -77,7 +77,7 @@ def single_push_curve(
     duration_s: float = 0.1,
     backend: str = "auto",
     seed: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
 ) -> list[PushPoint]:
     """The fall rate of ``policy`` under one push of each impulse in ``impulses`` (N s), ``episodes`` episodes (one
     world each) per impulse, under paper Table 1 randomization (``env_cfg`` holds the policy's settings); a fall by

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.envs.randomization import PushConfig
@@ -40,7 +40,7 @@ class SwitchIn:
     """Episodes in which a non-foot body touched the ground while up."""
     touch_ci95: tuple[float, float]
     longest_touch_s: float
-    falls_definition: str
+    falls_definition: Falls
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -55,7 +55,7 @@ def switch_in(
     source: str,
     episodes: int,
     horizon_s: float = 2.5,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
     backend: str = "auto",
     seed: int = 0,
 ) -> SwitchIn:

@@ -26,7 +26,7 @@ from gaitlib.checks import (
     table,
     text,
 )
-from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.defaults import Falls
 from gaitlib.errors import GaitlibError
 
 __all__ = ["BACKENDS", "SWITCH_STEP_S", "check_results"]
@@ -55,7 +55,7 @@ def _settings(strategies: Sequence[str]) -> Callable[[object, str], None]:
             "strategies": items(text(tuple(strategies)), low=1, unique=True),
             "magnitudes": items(_PUSH_N, low=1, high=1000, unique=True),
             "samples": _SAMPLES, "pairs": items(items(GAIT_NAME, length=2), low=1, unique=True),
-            "num_worlds": _WORLDS, "seed": _SEED, "falls": text(FALL_DEFINITIONS), **_PROTOCOL,
+            "num_worlds": _WORLDS, "seed": _SEED, "falls": text(tuple(Falls)), **_PROTOCOL,
             "push_lead_s": _SECONDS, "push_duration_s": span(0, 600, unit="s"),
             "push_interval_s": span(0, 600, unit="s"),
         },

@@ -98,7 +98,7 @@ def _routes(lib, status) -> dict | None:
         return {"state": "stale", "why": why, "fix": command or None}
     detours = {pair: list(path) for pair, path in table.detours().items()}
     return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours,
-            "falls": table.measured_with.get("falls", "contact")}
+            "falls": table.falls}
 
 
 def _num(value: float | None, digits: int) -> str:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import typer
 
-from gaitlib.defaults import DEFAULT_FALLS, FALL_DEFINITIONS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.values import IMPULSE_NS, MAX_MAGNITUDES, Bounds, OptionError, parse_values
 
 __all__ = [
@@ -85,20 +85,23 @@ def bounded(default, *names: str, help: str, bounds: Bounds):
     return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check)
 
 
-def falls_option():
-    """``--falls trunk|contact``: what ends an episode or a transition as a fall (default ``trunk``, the field's);
-    another value is refused in one line at parse time."""
-    def check(param: typer.CallbackParam, value: str) -> str:
-        if value not in FALL_DEFINITIONS:
-            raise OptionError(f"--falls takes {' or '.join(FALL_DEFINITIONS)}, got '{value}'")
-        return value
+_FALLS_HELP = (
+    "What is a fall: trunk (the default, the field's: the trunk too low, tilted past 90 degrees or on the ground, as "
+    "legged_gym's and Isaac Lab's A1 tasks count one; a leg's touch ridden through is reported beside as a touch) or "
+    "contact (gaitlib's strict definition: any non-foot body on the ground is a fall too)."
+)
 
-    return typer.Option(
-        DEFAULT_FALLS, "--falls", callback=check,
-        help="What is a fall: trunk (the default, the field's: the trunk too low, tilted past 90 degrees or on the "
-        "ground, as legged_gym's and Isaac Lab's A1 tasks count one; a leg's touch ridden through is reported beside "
-        "as a touch) or contact (gaitlib's strict definition: any non-foot body on the ground is a fall too).",
-    )
+
+def falls_option(name: str = "--falls", *, help: str = _FALLS_HELP):
+    """``--falls trunk|contact`` (or ``name``): what ends an episode or a transition as a fall, default ``trunk``
+    (the field's). The one place a definition is validated: the command gets a :class:`~gaitlib.defaults.Falls`,
+    and another value is refused in one line at parse time."""
+    def check(param: typer.CallbackParam, value: str) -> Falls:
+        if value not in tuple(Falls):
+            raise OptionError(f"{name} takes {' or '.join(Falls)}, got '{value}'")
+        return Falls(value)
+
+    return typer.Option(DEFAULT_FALLS.value, name, callback=check, help=help)
 
 
 def ray_option():

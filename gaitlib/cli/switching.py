@@ -25,7 +25,7 @@ from gaitlib.cli.options import (
     ray_option,
     workers_option,
 )
-from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY
+from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY, Falls
 
 __all__ = ["benchmark_command", "routes_command", "run_command"]
 
@@ -314,7 +314,7 @@ def routes_command(
     console.print(f"route table: {path}; measured in {out}")
 
 
-def _route_table(setup, *, strategies, pushes, falls: str):
+def _route_table(setup, *, strategies, pushes, falls: Falls):
     """The library's route table, after saying on stderr what it was measured with, and warning where that is not
     what this command runs (another strategy, push or definition of a fall)."""
     from rich.console import Console
@@ -322,7 +322,7 @@ def _route_table(setup, *, strategies, pushes, falls: str):
     from gaitlib.strategies.routes import load_routes
 
     table = load_routes(setup.resources.library, setup.gaits)
-    measured = table.measured_with.get("falls", "contact")
+    measured = table.falls
     console = Console(stderr=True)
     console.print(f"gaitlib: routes from {setup.resources.library.switching_dir / 'routes.json'}, measured with "
                   f"{table.strategy} at {table.push_n:g} N, falls counted the {measured} way", soft_wrap=True)
@@ -370,7 +370,7 @@ def _gap_title(gap) -> str:
     return "".join(f"; {part}" for part in parts)
 
 
-def _print_summary(facts: dict, out: Path, plot: Path, falls: str) -> None:
+def _print_summary(facts: dict, out: Path, plot: Path, falls: Falls) -> None:
     from rich.table import Table
 
     from gaitlib.cli.tables import table_console

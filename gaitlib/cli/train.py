@@ -20,7 +20,7 @@ from gaitlib.cli.options import (
     falls_option,
 )
 from gaitlib.cli.tables import print_measures
-from gaitlib.defaults import SWITCH_START
+from gaitlib.defaults import SWITCH_START, Falls
 
 __all__ = ["eval_command", "train_command"]
 
@@ -95,8 +95,8 @@ def train_command(
                                   "the magnitude uniform in 0-kick-max)."),
     kick_interval: str = typer.Option("1:3", "--kick-interval", help="With --push-kind kick: the quiet time before "
                                       "each kick, LOW:HIGH s, in (0, 60]."),
-    terminate: str = typer.Option(
-        "trunk", "--terminate", help="What ends a training episode: trunk (the trunk too low, tilted or on the ground: "
+    terminate: str = falls_option(
+        "--terminate", help="What ends a training episode: trunk (the trunk too low, tilted or on the ground: "
         "legged_gym's, the shipped library's) or contact (any non-foot body on the ground, the paper's)."
     ),
     contact_penalty: float = bounded(5.0, "--contact-penalty", help="Reward taken off per control step while a "
@@ -135,7 +135,7 @@ def train_command(
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
     recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_draw=kick_draw,
-                    kick_interval=_interval(kick_interval), terminate=terminate, contact_penalty=contact_penalty,
+                    kick_interval=_interval(kick_interval), falls=terminate, contact_penalty=contact_penalty,
                     gamma=gamma, lam=lam, action_delay=action_delay, critic_delay=critic_delay,
                     cycle_sync=cycle_sync)
     chosen = recipe.preset(get_preset(preset))
@@ -199,7 +199,7 @@ def train_command(
 
 
 def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int, plot: Path | None,
-                as_json: bool, falls: str) -> None:
+                as_json: bool, falls: Falls) -> None:
     """``gaitlib eval GAIT --impulses ...``: the single-push curve as a table (or JSON) and a plot."""
     from gaitlib.benchmark.push_curve import SECTORS, single_push_curve, write_push_plot
     from gaitlib.envs import EnvConfig

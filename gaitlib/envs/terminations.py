@@ -1,6 +1,6 @@
 """Early termination (docs/training.md) as small pure functions over N worlds; each returns (N,) bool.
 
-What a fall is has two definitions (:data:`gaitlib.defaults.FALL_DEFINITIONS`). ``trunk``, the default wherever
+What a fall is has two definitions (:class:`gaitlib.defaults.Falls`). ``trunk``, the default wherever
 gaitlib reports a fall: the trunk too low, tilted past the limit, or the trunk itself on the ground, as legged_gym's
 A1 (``terminate_after_contacts_on = ["base"]``, github.com/leggedrobotics/legged_gym, ``envs/a1/a1_config.py``) and
 Isaac Lab's velocity task (``base_contact``) count one; a leg's touch that the robot rides through is not a fall,
@@ -16,8 +16,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from gaitlib.defaults import FALL_DEFINITIONS
-from gaitlib.errors import GaitlibError
+from gaitlib.defaults import Falls
 from gaitlib.rotations import quat_angle_between, quat_rotate
 
 __all__ = [
@@ -49,17 +48,15 @@ class TerminationConfig:
     ``trunk`` definition), as legged_gym's A1 ends an episode only when its base touches the ground and penalizes
     its legs' contacts."""
 
-    def counting(self, falls: str, **fields) -> TerminationConfig:
-        """These terminations (``fields`` replaced) counting falls by the definition ``falls`` (``trunk`` or
-        ``contact``)."""
-        if falls not in FALL_DEFINITIONS:
-            raise GaitlibError(f"falls '{falls}': {' or '.join(FALL_DEFINITIONS)}")
-        return replace(self, body_contact=falls == "contact", **fields)
+    def counting(self, falls: Falls, **fields) -> TerminationConfig:
+        """These terminations (``fields`` replaced) counting falls by the definition ``falls``: the one place a
+        definition becomes terminations."""
+        return replace(self, body_contact=falls == Falls.CONTACT, **fields)
 
     @property
-    def falls(self) -> str:
-        """The definition of a fall these terminations count (``trunk`` or ``contact``)."""
-        return "contact" if self.body_contact else "trunk"
+    def falls(self) -> Falls:
+        """The definition of a fall these terminations count."""
+        return Falls.CONTACT if self.body_contact else Falls.TRUNK
 
 
 def too_low(root_height: torch.Tensor, *, min_height: float) -> torch.Tensor:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.errors import GaitlibError
 from gaitlib.library.layout import first_fit, is_shipped, ordered_pairs
 from gaitlib.library.store import Library
@@ -76,7 +76,7 @@ class Bundle:
     """One record per transition file fitted on: ``path`` and its collection ``settings``."""
     inputs: tuple[str, ...]
     """Input kinds fitted (the first is the net written; several: ``--ablation``)."""
-    falls: dict[str, str]
+    falls: dict[str, Falls]
     """File name -> the definition of a fall its labels followed (files from before it was recorded: ``contact``,
     the only one there was)."""
 
@@ -228,10 +228,10 @@ def read_bundle(library: Library) -> Bundle:
             data=tuple({"path": str(f["path"]), "settings": dict(f["settings"])} for f in files),
             inputs=tuple(accuracy["balanced_validation_accuracy"]),
             falls={
-                Library.NET: str(net["fit"].get("falls", "contact")),
-                Library.TMT: str(tmt["info"].get("falls", "contact")),
-                Library.CALIBRATION: str(records[Library.CALIBRATION]["info"].get("falls", "contact")),
-                Library.ACCURACY: str(accuracy.get("falls", "contact")),
+                Library.NET: Falls(net["fit"].get("falls", Falls.CONTACT)),
+                Library.TMT: Falls(tmt["info"].get("falls", Falls.CONTACT)),
+                Library.CALIBRATION: Falls(records[Library.CALIBRATION]["info"].get("falls", Falls.CONTACT)),
+                Library.ACCURACY: Falls(accuracy.get("falls", Falls.CONTACT)),
             },
         )
     except (KeyError, TypeError, ValueError, IndexError) as error:

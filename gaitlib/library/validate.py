@@ -32,7 +32,7 @@ from gaitlib.checks import (
     table,
     text,
 )
-from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.defaults import Falls
 from gaitlib.errors import GaitlibError
 
 if TYPE_CHECKING:
@@ -74,7 +74,8 @@ _PRESET = record(
 )
 _RECIPE = record(
     {
-        "push_kind": text(), "kick_max": number(0), "kick_interval": span(0, 600, unit="s"), "terminate": text(),
+        "push_kind": text(), "kick_max": number(0), "kick_interval": span(0, 600, unit="s"),
+        "terminate": text(tuple(Falls)),
         "contact_penalty": number(), "gamma": number(0, 1, nullable=True), "lam": number(0, 1, nullable=True),
         "action_delay": number(0, 10, whole=True, nullable=True), "critic_delay": flag(),
     },
@@ -118,7 +119,7 @@ _EVALUATION = record(
         "reference_speed": number(-20, 20, unit="m/s"), "speed_error": number(0),
         "mean_episode_seconds": number(0, unit="s"), "action_delay_steps": number(0, 10, whole=True, nullable=True),
         "fall_ci95": span(0, 1), "touch_rate": _RATE, "touch_ci95": span(0, 1), "longest_touch_s": number(0, unit="s"),
-        "contact_agreement": _RATE, "push_max": _PUSH_N, "push_force": _PUSH_N, "falls": text(FALL_DEFINITIONS),
+        "contact_agreement": _RATE, "push_max": _PUSH_N, "push_force": _PUSH_N, "falls": text(tuple(Falls)),
         "falls_by_cause": table(text(), _COUNT), "seed": _SEED, "command": text(),
         "late_steps": number(0, 10, whole=True),
     },

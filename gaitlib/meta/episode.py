@@ -10,7 +10,7 @@ from itertools import pairwise
 import numpy as np
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY
+from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
 from gaitlib.envs.terminations import TerminationConfig
@@ -38,8 +38,8 @@ class RunTrace:
     """Control period, s."""
     push_n: float
     """Push magnitude, N (0: none): pushes hit from ``DISTURBANCE_LEAD_S`` before each request until the deadline."""
-    falls: str = DEFAULT_FALLS
-    """What a fall was (:data:`gaitlib.defaults.FALL_DEFINITIONS`)."""
+    falls: Falls = DEFAULT_FALLS
+    """What a fall was."""
     time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(T,) time at the end of each step, s."""
     active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -103,7 +103,7 @@ def run_episode(
     action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
 ) -> RunTrace:
     """Switch trials of :mod:`gaitlib.meta.trials`, chained on one robot: run ``source``, request ``dests[0]`` at
     ``request_s``, let ``strategy`` switch; ``hold_s`` after the end of that switch's control step request the next
@@ -111,7 +111,7 @@ def run_episode(
     (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit the robot from ``DISTURBANCE_LEAD_S`` before
     each request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits
     exactly this many control steps (``None``: the policies' trained random delay). ``falls``: what ends the run as
-    a fall (:data:`gaitlib.defaults.FALL_DEFINITIONS`); touches are recorded either way."""
+    a fall (:class:`gaitlib.defaults.Falls`); touches are recorded either way."""
     dests = (dests,) if isinstance(dests, str) else tuple(dests)
     gaits = [setup.gait_index(g) for g in (source, *dests)]  # unknown names: one line each
     if not dests:

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from gaitlib.atomic import read_json, write_json
+from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
 from gaitlib.library.layout import check_identities
 from gaitlib.transition_net import TransitionNet, batch_features
@@ -85,7 +86,7 @@ class Calibration:
 
 
 def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarray, identities: dict[str, str],
-              falls: str):
+              falls: Falls):
     """Fit the :class:`Calibration` of ``net`` on the rows of ``data`` outside ``train_rows`` (the rows it was
     trained on), each (pair, label) class weighted by its count in ``data`` over its count among those rows; the
     labels are ``data``'s ``success``, which ``falls`` names the definition of (recorded in the info)."""

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.atomic import write_json
-from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL
+from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL, Falls
 from gaitlib.errors import TransitionDataError, UnknownNameError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
@@ -67,7 +67,7 @@ class FitReport:
     note: str | None = None
     """What reading the data left out or tolerated (samples of policies the library no longer holds), else
     ``None``."""
-    falls: str = DEFAULT_FALLS
+    falls: Falls = DEFAULT_FALLS
     """The definition of a fall the labels followed."""
     data_sha256: tuple[str, ...] = ()
     """The content SHA-256 of each file of :attr:`data`, same order
@@ -110,7 +110,7 @@ def fit_library(
     inputs: Sequence[str] = ("latent",),
     epochs: int = 100,
     seed: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
     min_per_label: int = MIN_PER_LABEL,
     on_epoch: Callable[[str, EpochStats], None] | None = None,
 ) -> FitReport:
@@ -166,7 +166,8 @@ def fit_library(
     return fitted
 
 
-def check_validatable(data: TransitionData, *, falls: str = DEFAULT_FALLS, min_per_label: int = MIN_PER_LABEL) -> None:
+def check_validatable(data: TransitionData, *, falls: Falls = DEFAULT_FALLS,
+                      min_per_label: int = MIN_PER_LABEL) -> None:
     """Refuse, in one line naming the pairs short of it, data in which an ordered pair has fewer than
     ``min_per_label`` successful or failed switches (labels by ``falls``): its held-out accuracy would rest on a
     handful of switches, or on none (:data:`MIN_PER_LABEL`; 0 accepts any data)."""
@@ -189,7 +190,7 @@ def check_validatable(data: TransitionData, *, falls: str = DEFAULT_FALLS, min_p
 
 
 def evaluate_library(library: Library, data: TransitionData, *, sources: Sequence[Path | str],
-                     falls: str = DEFAULT_FALLS) -> dict:
+                     falls: Falls = DEFAULT_FALLS) -> dict:
     """Score ``library``'s transition-net on ``data`` (balanced per pair), labelled by the definition of a fall
     ``falls``: input kind, data, the definitions and accuracy per ``"m-n"`` (0-1). Data of other policies than the
     library's are refused."""
@@ -198,7 +199,8 @@ def evaluate_library(library: Library, data: TransitionData, *, sources: Sequenc
     saved = load_net(library.net_path, identities=library.identities(data.header.gaits))
     accuracy = {f"{m}-{n}": a for (m, n), a in evaluate_net(saved.net, data.labelled(falls)).items()}
     return {"input": saved.metadata["input"], "data": [str(s) for s in sources], "falls": falls,
-            "net_fitted_with_falls": saved.metadata["fit"].get("falls", "contact"), "accuracy": accuracy}
+            "net_fitted_with_falls": Falls(saved.metadata["fit"].get("falls", Falls.CONTACT)),
+            "accuracy": accuracy}
 
 
 def _checked_identities(library: Library, data: TransitionData, sources: Sequence[Path | str]) -> dict[str, str]:

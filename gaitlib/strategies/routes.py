@@ -26,7 +26,7 @@ from pathlib import Path
 
 from gaitlib.atomic import read_json, stale_temporaries, write_json
 from gaitlib.checks import GAIT_NAME, SHA256, check_content, items, number, record, table, text
-from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.defaults import Falls
 from gaitlib.errors import GaitlibError
 from gaitlib.library.layout import is_shipped, ordered_pairs
 from gaitlib.library.store import Library
@@ -44,7 +44,7 @@ _PAIR = text(pattern="[^-, ]+-[^-, ]+", what="a pair of gaits 'm-n'")
 _MEASURED_WITH = record({
     "samples": number(1, 1e6, whole=True), "seed": number(0, 2**32 - 1, whole=True),
     "num_worlds": number(1, 65536, whole=True), "warmup_s": _SECONDS, "source_extra_s": _SECONDS,
-    "horizon_s": number(0, 600, low_open=True, unit="s"), "deadline_s": _SECONDS, "falls": text(FALL_DEFINITIONS),
+    "horizon_s": number(0, 600, low_open=True, unit="s"), "deadline_s": _SECONDS, "falls": text(tuple(Falls)),
 })
 
 
@@ -75,6 +75,12 @@ class RouteTable:
             raise GaitlibError(f"the route table lacks the pairs {', '.join(missing)}: measure every ordered pair")
         if self.max_legs < 1:
             raise GaitlibError(f"a route takes at least one switch, not {self.max_legs}")
+
+    @property
+    def falls(self) -> Falls:
+        """The definition of a fall the rates were counted with (``measured_with``; a table without it:
+        ``contact``, the only one there was)."""
+        return Falls(self.measured_with.get("falls", Falls.CONTACT))
 
     def success(self, source: str, dest: str) -> float:
         """Measured success rate of the direct switch ``source`` -> ``dest`` (0-1)."""
@@ -169,7 +175,7 @@ def _measure_again(library: Library, saved: Mapping) -> str:
     measured = saved["measured_with"]
     words = ["gaitlib", "routes", "--library", library.root, "--strategy", saved["strategy"], "--push",
              f"{saved['push_n']:g}", "--max-legs", saved["max_legs"], "--samples", measured["samples"], "--worlds",
-             measured["num_worlds"], "--seed", measured["seed"], "--falls", measured.get("falls", "contact")]
+             measured["num_worlds"], "--seed", measured["seed"], "--falls", Falls(measured.get("falls", Falls.CONTACT))]
     if is_shipped(library.root):
         words.append("--replace")
     return " ".join(shlex.quote(str(w)) for w in words)

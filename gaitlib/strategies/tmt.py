@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from gaitlib.atomic import read_json, write_json
+from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
 from gaitlib.library.layout import check_identities
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
@@ -106,7 +107,7 @@ def sample_scores(table: TransitionTable, data: TransitionData) -> dict[str, np.
 
 
 def build_table(
-    data: TransitionData, *, identities: dict[str, str], source: str, falls: str, bins: int = PHASE_GRID
+    data: TransitionData, *, identities: dict[str, str], source: str, falls: Falls, bins: int = PHASE_GRID
 ) -> TransitionTable:
     """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds; ``source`` says
     where the data came from and ``falls`` the definition of a fall its ``success`` labels follow (both kept in

@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass, replace
 
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import FallTally
@@ -65,8 +65,8 @@ class EvalResult:
     """Control steps every action waited (``None``: the randomized delay of training)."""
     late_steps: int
     """Control steps every action waited beyond that (the trained range shifted; 0: as trained)."""
-    falls: str
-    """The definition of a fall counted (:data:`~gaitlib.envs.terminations.FALL_DEFINITIONS`): ``trunk`` (the
+    falls: Falls
+    """The definition of a fall counted: ``trunk`` (the
     field's) or ``contact`` (a non-foot body on the ground is a fall too)."""
     falls_by_cause: dict[str, int]
     """Falls that met each termination (``body_contact``: a non-foot body on the ground, with ``contact`` only;
@@ -89,7 +89,7 @@ def evaluate_policy(
     push_max: float = 0.0,
     action_delay_steps: int | None = None,
     late_steps: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
     seed: int = 0,
 ) -> EvalResult:
     """Run ``episodes`` worlds for ``seconds`` s each with the deterministic policy and Table 1 randomization.

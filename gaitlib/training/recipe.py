@@ -32,7 +32,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from gaitlib.defaults import FALL_DEFINITIONS
+from gaitlib.defaults import Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PUSH_DRAWS, PushConfig
 from gaitlib.envs.terminations import TerminationConfig
@@ -43,6 +43,7 @@ from gaitlib.training.presets import TrainPreset
 __all__ = ["PAPER_RECIPE", "PUSH_KINDS", "Recipe"]
 
 _KICK_DRAW_BEFORE_ITS_OPTION = "disk"  # entries recorded before kicks could be drawn per axis drew them so
+_FALLS_KEY = "terminate"  # the key an entry's metadata records Recipe.falls under (its option: train --terminate)
 
 PUSH_KINDS = ("force", "kick")
 """``force``: the paper's pushes (up to the preset's largest force, 0.1-0.3 s, every 1-3 s); ``kick``: velocity
@@ -63,9 +64,10 @@ class Recipe:
     (a random direction, the magnitude uniform in [0, kick_max])."""
     kick_interval: tuple[float, float] = (1.0, 3.0)
     """With ``kick``: the quiet time before each kick, uniform in this range, s (mjlab: 1-3; legged_gym: 15)."""
-    terminate: str = "trunk"
-    """What ends a training episode as a fall: ``contact`` (any non-foot body on the ground, the paper's) or
-    ``trunk`` (the trunk too low, tilted or on the ground; a leg's touch ridden through)."""
+    falls: Falls = Falls.TRUNK
+    """What ends a training episode as a fall (``train --terminate``; recorded as ``terminate``): ``contact`` (any
+    non-foot body on the ground, the paper's) or ``trunk`` (the trunk too low, tilted or on the ground; a leg's touch
+    ridden through)."""
     contact_penalty: float = 5.0
     """Reward taken off per control step while a non-foot body touches the ground (the imitation reward lies in
     [0, 1] per step), >= 0."""
@@ -85,8 +87,6 @@ class Recipe:
     def __post_init__(self) -> None:
         if self.push_kind not in PUSH_KINDS:
             raise GaitlibError(f"--push-kind takes {' or '.join(PUSH_KINDS)}, got '{self.push_kind}'")
-        if self.terminate not in FALL_DEFINITIONS:
-            raise GaitlibError(f"--terminate takes {' or '.join(FALL_DEFINITIONS)}, got '{self.terminate}'")
         if self.kick_draw not in PUSH_DRAWS:
             raise GaitlibError(f"--kick-draw takes {' or '.join(PUSH_DRAWS)}, got '{self.kick_draw}'")
         low, high = self.kick_interval
@@ -117,7 +117,7 @@ class Recipe:
         if self.action_delay is not None:
             randomization = dataclasses.replace(randomization, action_delay_steps=(self.action_delay,) * 2)
         return dataclasses.replace(
-            cfg, pushes=pushes, termination=TerminationConfig().counting(self.terminate),
+            cfg, pushes=pushes, termination=TerminationConfig().counting(self.falls),
             contact_penalty=self.contact_penalty, randomization=randomization, cycle_sync=self.cycle_sync,
             observation=dataclasses.replace(cfg.observation, critic_delay=self.critic_delay),
         )
@@ -131,18 +131,21 @@ class Recipe:
         return TOTAL_MASS * self.kick_max * preset.push_share(iteration, iterations) / control_dt
 
     def as_dict(self) -> dict:
-        """What the entry's metadata records."""
-        return dataclasses.asdict(self)
+        """What the entry's metadata records (the definition of a fall under its recorded key, ``terminate``)."""
+        recorded = dataclasses.asdict(self) | {"falls": self.falls.value}
+        return {(_FALLS_KEY if k == "falls" else k): v for k, v in recorded.items()}
 
     @classmethod
     def from_record(cls, record: dict) -> Recipe:
         """The recipe an entry's metadata records (:meth:`as_dict`), also one recorded before ``kick_draw`` and
         ``cycle_sync`` existed."""
-        fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, "cycle_sync": False, **record}
-        return cls(**{**fields, "kick_interval": tuple(fields.get("kick_interval", cls.kick_interval))})
+        fields = {"kick_draw": _KICK_DRAW_BEFORE_ITS_OPTION, "cycle_sync": False}
+        fields |= {("falls" if k == _FALLS_KEY else k): v for k, v in record.items()}
+        return cls(**{**fields, "kick_interval": tuple(fields.get("kick_interval", cls.kick_interval)),
+                      "falls": Falls(fields.get("falls", cls.falls))})
 
 
-PAPER_RECIPE = Recipe(push_kind="force", terminate="contact", contact_penalty=0.0, gamma=None, lam=None)
+PAPER_RECIPE = Recipe(push_kind="force", falls=Falls.CONTACT, contact_penalty=0.0, gamma=None, lam=None)
 """The recipe of the libraries shipped before the robust one (``library-paper/``, ``library-switch-start/``) and the
 robust recipe's ablation baseline ("today's"): the paper's pushes, an episode ended on any non-foot body's touch, no
 contact penalty, the preset's discount."""

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.errors import TransitionDataError
 from gaitlib.transition_net.dataset import BalancedSplit, balanced_split
 from gaitlib.transition_net.features import FeatureSpec, batch_features
@@ -50,8 +50,8 @@ class FitConfig:
     """Cap on the balanced samples used per pair (both labels together); ``None``: all the smaller class allows."""
     seed: int = 0
     """Seed of the split, the initial weights, the mini-batch order and dropout."""
-    falls: str = DEFAULT_FALLS
-    """The definition of a fall the labels follow (:data:`gaitlib.defaults.FALL_DEFINITIONS`): the samples'
+    falls: Falls = DEFAULT_FALLS
+    """The definition of a fall the labels follow: the samples'
     ``trunk`` outcome or their ``contact`` one."""
 
 

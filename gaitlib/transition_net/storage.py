@@ -71,7 +71,7 @@ def save_net(path: Path, result: FitResult) -> Path:
             "validation_overall": result.validation_overall,
             "train": result.train_accuracy,
         },
-        "fit": dataclasses.asdict(result.config),
+        "fit": dataclasses.asdict(result.config) | {"falls": result.config.falls.value},
         "versions": {"gaitlib": gaitlib.__version__, "torch": torch.__version__},
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gaitlib.defaults import Falls
+
 __all__ = [
     "COLUMNS",
     "Column",
@@ -107,13 +109,11 @@ class TransitionBatch:
         """Column name -> array, in :data:`COLUMNS` order."""
         return {name: getattr(self, name) for name in COLUMNS}
 
-    def labelled(self, falls: str) -> TransitionBatch:
+    def labelled(self, falls: Falls) -> TransitionBatch:
         """These samples with ``success`` the outcome by the definition of a fall ``falls`` (``trunk``: as stored;
         ``contact``: ``success_contact``), for whatever reads ``success`` (fits, calibration, TMT, maps)."""
-        if falls == "trunk":
+        if falls != Falls.CONTACT:
             return self
-        if falls != "contact":
-            raise ValueError(f"falls '{falls}': trunk or contact")
         return TransitionBatch(**(self.columns() | {"success": self.success_contact}))
 
     def select(self, index: np.ndarray | slice) -> TransitionBatch:
@@ -174,6 +174,6 @@ class TransitionData:
         """The file's gaits, identities, latent size and settings."""
         return self.info.header
 
-    def labelled(self, falls: str) -> TransitionData:
+    def labelled(self, falls: Falls) -> TransitionData:
         """This data labelled by the definition of a fall ``falls`` (:meth:`TransitionBatch.labelled`)."""
         return TransitionData(self.info, self.samples.labelled(falls))
