@@ -2,7 +2,7 @@
 transition-net and the TMT. The result is a library folder that ``gaitlib run --library DIR`` can use.
 
     python examples/build_library.py --minutes 20 --samples 20000     # about 1.5 h on a 2-core CPU
-    python examples/build_library.py --minutes 0.5 --samples 500      # a smoke run of a few minutes
+    python examples/build_library.py --minutes 0.5 --samples 500 --min-per-label 0  # a smoke run of a few minutes
 
 The shipped ``library/`` was built the same way with the CLI (see docs/results.md for its sizes).
 """
@@ -13,6 +13,7 @@ import argparse
 from pathlib import Path
 
 from gaitlib.collection import CollectConfig, collect
+from gaitlib.defaults import MIN_PER_LABEL
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library
 from gaitlib.strategies.fitting import fit_library
@@ -28,6 +29,8 @@ def main() -> None:
     parser.add_argument("--minutes", type=float, default=20.0, help="training time per gait")
     parser.add_argument("--samples", type=int, default=20_000, help="transition samples to collect")
     parser.add_argument("--library", type=Path, default=Path("examples_library"))
+    parser.add_argument("--min-per-label", type=int, default=MIN_PER_LABEL,
+                        help="successes and failures each pair needs for the fit to be validated (0: any)")
     args = parser.parse_args()
     library = Library(args.library)
 
@@ -47,7 +50,7 @@ def main() -> None:
 
     data = Path("data") / "examples_transitions.h5"  # rerunning resumes the collection
     collect(data, library=library, gaits=GAITS, config=CollectConfig(samples=args.samples, push_max=400))
-    report = fit_library(library, read_all([data]), sources=[data])
+    report = fit_library(library, read_all([data]), sources=[data], min_per_label=args.min_per_label)
     for pair, accuracy in report.accuracy()["latent"].items():
         print(f"transition-net {pair}: {100 * accuracy:.1f}% balanced validation accuracy")
 
