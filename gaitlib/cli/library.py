@@ -30,8 +30,9 @@ def library_command(
         raise GaitlibError(f"no library at {lib.root}")
     status = library_status(lib)
     routes = _routes(lib, status)
+    survival = _survival(lib, status)
     if as_json:
-        print(json_text(status.as_dict() | {"routes": routes}))
+        print(json_text(status.as_dict() | {"routes": routes, "survival": survival}))
         return
     console = table_console()
     gaits = Table(title=f"{lib.root}{' (shipped with gaitlib)' if status.shipped else ''}: gaits")
@@ -69,13 +70,18 @@ def library_command(
         console.print(f"problem: {escape(routes['why'])}", soft_wrap=True)
         if routes["fix"]:
             console.print(f"  fix: {escape(routes['fix'])}", soft_wrap=True)
+    if survival is not None and survival["state"] == "current":
+        console.print(f"survival estimate (the guard): horizon {survival['horizon_s']:g} s, margin "
+                      f"{survival['margin']:g}, inputs {', '.join(survival['inputs'])}", soft_wrap=True)
+    elif survival is not None:
+        console.print(f"problem: {escape(survival['why'])}", soft_wrap=True)
     other = status.other_falls()
     if routes is not None and routes.get("falls", DEFAULT_FALLS) != DEFAULT_FALLS:
         other["switching/routes.json"] = routes["falls"]
     if other:
         console.print(f"counted with another definition of a fall than the default ({DEFAULT_FALLS}): "
                       + ", ".join(f"{name} ({falls})" for name, falls in other.items()), soft_wrap=True)
-    if not status.problems and (routes is None or routes["state"] == "current"):
+    if not status.problems and all(x is None or x["state"] == "current" for x in (routes, survival)):
         console.print("nothing stale: every gait is usable and every pair is covered")
     for problem in status.problems:
         console.print(f"problem: {escape(problem.text)}", soft_wrap=True)
@@ -99,6 +105,22 @@ def _routes(lib, status) -> dict | None:
     detours = {pair: list(path) for pair, path in table.detours().items()}
     return {"state": "current", "strategy": table.strategy, "push_n": table.push_n, "detours": detours,
             "falls": table.falls}
+
+
+def _survival(lib, status) -> dict | None:
+    """The library's survival estimate (``gaitlib survival fit``): ``None`` without one, else its state, and its
+    horizon, margin and inputs when it is current."""
+    from gaitlib.errors import GaitlibError
+    from gaitlib.strategies.survival import SURVIVAL_FILE, load_survival
+
+    if status.bundle is None or not (lib.switching_dir / SURVIVAL_FILE).is_file():
+        return None
+    try:
+        estimate = load_survival(lib, status.bundle.gaits)
+    except GaitlibError as stale:  # recorded with other policies, or damaged
+        return {"state": "stale", "why": str(stale)}
+    return {"state": "current", "horizon_s": estimate.horizon_s, "margin": estimate.margin,
+            "inputs": list(estimate.inputs)}
 
 
 def _num(value: float | None, digits: int) -> str:

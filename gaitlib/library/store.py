@@ -94,6 +94,9 @@ class Library:
     """The files of :attr:`SWITCHING` that are fitted together and checked against :attr:`CHECKSUMS`."""
     CHECKSUMS = "checksums.json"
     """The SHA-256 of each of the other files of :attr:`SWITCHING`, checked before any of them is used."""
+    SURVIVAL = "survival.pt"
+    """The guard's survival estimate (``gaitlib survival fit``), in :attr:`SWITCHING`: made with the policies it
+    records, so a refit keeps it and it reads as stale once the gaits change (:mod:`gaitlib.strategies.survival`)."""
     ROUTES = "routes.json"
     """The route table (``gaitlib routes``), in :attr:`SWITCHING`: measured with the models of :attr:`BUNDLE`, whose
     checksum list it records, so a refit keeps it and it then reads as stale (:mod:`gaitlib.benchmark.routes`)."""

@@ -160,9 +160,9 @@ def fit_library(
         write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
         library.write_checksums(staging)
-        routes = library.switching_dir / Library.ROUTES
-        if routes.is_file():  # measured with the old models: kept, so that it reads as stale, never as missing
-            shutil.copy2(routes, staging / Library.ROUTES)
+        for kept in (Library.ROUTES, Library.SURVIVAL):  # made with the old models or policies: kept, so that
+            if (library.switching_dir / kept).is_file():  # each reads as stale where it is, never as missing
+                shutil.copy2(library.switching_dir / kept, staging / kept)
     return fitted
 
 

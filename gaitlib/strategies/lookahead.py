@@ -67,6 +67,24 @@ class LookaheadStrategy(Strategy):
         rates[ahead.unsqueeze(0) > query.steps_left.unsqueeze(1)] = float("-inf")  # past that world's deadline
         return rates.max(dim=1).values
 
+    def offers(self, source: torch.Tensor, latent: torch.Tensor, phase_source: torch.Tensor,
+               candidates: torch.Tensor, gaits: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """What switching now offers worlds running ``source`` (k,) (actor latents ``latent`` (k, L), phases
+        ``phase_source`` (k,)): (k, G) the calibrated success of switching to each gait at its best candidate
+        destination phase (NaN on the world's own gait) and (k, G) that phase, cycles."""
+        k = len(source)
+        dest = torch.arange(gaits, device=source.device).repeat(k)
+        rows = torch.arange(k, device=source.device).repeat_interleave(gaits)
+        other = dest != source[rows]
+        rows, dest = rows[other], dest[other]
+        query = SwitchQuery(source=source[rows], dest=dest, phase_source=phase_source[rows], latent=latent[rows],
+                            candidates=candidates)
+        best, index = self.scores(query).max(dim=1)
+        offer = torch.full((k, gaits), float("nan"), device=source.device)
+        phase = torch.full((k, gaits), float("nan"), device=source.device)
+        offer[rows, dest], phase[rows, dest] = best, candidates[index]
+        return offer, phase
+
     def decide(self, query: SwitchQuery) -> Decision:
         scores = self.scores(query)
         best, index = scores.max(dim=1)

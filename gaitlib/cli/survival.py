@@ -1,0 +1,106 @@
+"""``gaitlib survival record`` (the states the guard's survival estimate learns from) and ``gaitlib survival fit``
+(the estimate, its calibration, horizon and margin, into the library's switching folder)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gaitlib.atomic import json_text
+from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
+
+__all__ = ["app"]
+
+app = typer.Typer(help="The guard's survival estimate: record states before falls and survivals, fit it.")
+
+_LIBRARY = typer.Option(None, "--library", help="Library folder (default: the shipped library/).")
+
+
+@app.command("record")
+def record_command(
+    out: Path = typer.Option(Path("data/survival.h5"), "--out", help="State file (HDF5; resumed if it exists)."),
+    episodes: int = bounded(1024, "--episodes", help="Episodes the file holds when done;", bounds=COUNT),
+    worlds: int = bounded(256, "--worlds", help="Episodes run at once;", bounds=WORLDS),
+    impulse_max: float = bounded(30.0, "--impulse-max", help="Largest shove, uniform from 0;",
+                                 bounds=Bounds(low=0, high=200, unit="N s")),
+    seed: int = bounded(0, "--seed", help="Random seed (batch b runs with seed + b);", bounds=SEED),
+    backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
+    falls: str = falls_option(),
+    library: Path | None = _LIBRARY,
+) -> None:
+    """Record states of every gait before falls and survivals: one shove of 0 to --impulse-max N s per episode,
+    a quarter of them unshoved and a quarter switched to another gait first (docs/switching.md, "The guard")."""
+    from gaitlib.cli.options import check_out_file, check_worlds
+    from gaitlib.collection.survival import SurvivalRecording, record_survival
+    from gaitlib.meta import load_switching
+
+    check_out_file("--out", out)
+    check_worlds("--worlds", worlds, backend=backend)
+    config = SurvivalRecording(episodes=episodes, num_worlds=worlds, impulse_max_ns=impulse_max, seed=seed,
+                               backend=backend, falls=falls)
+    setup = load_switching(library)
+    setup.resources.calibration  # noqa: B018 (refuse a library without a calibrated net before any work)
+    data = record_survival(out, setup, config, progress=lambda d, t: print(f"{d}/{t} episodes", flush=True))
+    print(f"{out}: {len(data['gait']):,} states of {episodes} episodes; fit: gaitlib survival fit {out}"
+          + (f" --library {library}" if library else ""))
+
+
+@app.command("fit")
+def fit_command(
+    data: Path = typer.Argument(..., help="A state file of gaitlib survival record."),
+    horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]."),
+    margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
+    inputs: str = typer.Option("latent,phase,value", "--inputs",
+                               help="Inputs besides the gait: latent, phase, value, explicit."),
+    epochs: int = bounded(20, "--epochs", help="Training epochs;", bounds=COUNT),
+    seed: int = bounded(0, "--seed", help="Split and training seed;", bounds=SEED),
+    library: Path | None = typer.Option(
+        None, "--library", help="Library to write the estimate into (default: $GAITLIB_LIBRARY, else your own "
+        "runs/library, made from the shipped one on its first write)."
+    ),
+    replace: bool = typer.Option(False, "--replace", help="Write into the shipped library (refused without it)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as one JSON object."),
+) -> None:
+    """Fit the survival estimate on recorded states, calibrate it, choose the guard's horizon and margin on a
+    held-out split, write it into the library's switching folder and report it."""
+    from gaitlib.collection.survival import read_survival_states
+    from gaitlib.errors import GaitlibError
+    from gaitlib.library import Library
+    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+    from gaitlib.strategies.survival import check_guard, fit_survival, save_survival
+
+    try:
+        chosen = tuple(float(h) for h in horizons.split(","))
+    except ValueError:
+        raise GaitlibError(f"--horizons takes seconds separated by commas, got '{horizons}'") from None
+    for h in chosen:
+        check_guard(horizon_s=h)
+    check_guard(margin=margin)
+    target, copy_from = writing_target(library)
+    check_writable(target, replace=replace, command="gaitlib survival fit", what="the survival estimate")
+    header, states = read_survival_states(data)
+    Library(copy_from or target).check_identities(header["identities"], what=f"survival states {data}")
+    estimate = fit_survival(states, gaits=tuple(header["gaits"]), identities=header["identities"], dt=header["dt"],
+                            inputs=tuple(i.strip() for i in inputs.split(",")), horizons_s=chosen, margin=margin,
+                            epochs=epochs, seed=seed)
+    if copy_from is not None:
+        copy_library(copy_from, target)
+    with library_writer(target, command="gaitlib survival fit"):
+        path = save_survival(Library(target), estimate, data=data)
+    report = estimate.info["report"]
+    if as_json:
+        print(json_text({"path": str(path), "horizon_s": estimate.horizon_s, "margin": estimate.margin}
+                        | estimate.info))
+        return
+    print(f"{path}: horizon {estimate.horizon_s:g} s, margin {estimate.margin:g} (chosen on the selection split)")
+    print("reliability (selection split): predicted -> observed (states)")
+    for row in report["reliability"]:
+        print(f"  {row['bin'][0]:.1f}-{row['bin'][1]:.1f}: {row['predicted']:.3f} -> {row['observed']:.3f} "
+              f"({row['states']})")
+    lead, p10 = (report[k] for k in ("lead_median_s", "lead_p10_s"))
+    print(f"falls warned before: {report['warned']} of {report['falls']}; lead time median "
+          f"{'-' if lead is None else f'{lead:.2f} s'}, 10th percentile {'-' if p10 is None else f'{p10:.2f} s'}")
+    alarms = report["false_alarms_per_min"]
+    print(f"false alarms at 0 N: {'-' if alarms is None else f'{alarms:.3f}'} per minute "
+          f"(over {report['unshoved_minutes']:.1f} unshoved minutes)")

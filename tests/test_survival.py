@@ -1,0 +1,82 @@
+"""The guard's survival estimate: recorded states (resumable), the fit, its calibration and choices, the file in the
+library's switching folder, and the one-line refusals."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gaitlib.collection.survival import SurvivalRecording, read_survival_states, record_survival
+from gaitlib.errors import GaitlibError
+from gaitlib.library import Library
+from gaitlib.meta import load_switching
+from gaitlib.strategies.survival import check_guard, fit_survival, load_survival, save_survival
+from tests.conftest import copy_library
+
+SMALL = {"num_worlds": 6, "settle_s": 0.4, "after_s": 0.6, "record_from_s": 0.3, "impulse_max_ns": 60.0}
+
+
+@pytest.fixture(scope="module")
+def recorded(switching_library, tmp_path_factory):
+    """Twelve episodes recorded in two runs (the second resumes the first's file)."""
+    path = tmp_path_factory.mktemp("survival") / "states.h5"
+    setup = load_switching(switching_library)
+    first = record_survival(path, setup, SurvivalRecording(episodes=6, **SMALL))
+    data = record_survival(path, setup, SurvivalRecording(episodes=12, **SMALL))
+    return path, setup, first, data
+
+
+def test_recorded_states_resume_and_label(recorded):
+    path, setup, first, data = recorded
+    assert len(np.unique(data["episode"])) == 12
+    for column, values in first.items():  # resuming keeps what was recorded and adds to it
+        np.testing.assert_array_equal(data[column][: len(values)], values)
+    header, read = read_survival_states(path)
+    assert header["gaits"] == list(setup.gaits) and header["dt"] > 0
+    assert len(read["gait"]) == len(data["gait"])
+    own = data["offer"][np.arange(len(data["gait"])), data["gait"]]
+    assert np.isnan(own).all()  # no offer to switch to the gait that runs
+    other = data["offer"][np.arange(len(data["gait"])), 1 - data["gait"]]
+    assert ((other >= 0) & (other <= 1)).all()
+    fell = np.isfinite(data["fall_s"])
+    assert (data["time_s"][fell] < data["fall_s"][fell]).all()  # only states of a robot still up
+    with pytest.raises(GaitlibError, match="other settings"):
+        record_survival(path, setup, SurvivalRecording(episodes=14, **(SMALL | {"impulse_max_ns": 5.0})))
+
+
+def test_fit_choose_save_load(recorded, switching_library, tmp_path):
+    path, setup, _, data = recorded
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    identities = library.identities(setup.gaits)
+    dt = read_survival_states(path)[0]["dt"]
+    estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, horizons_s=(0.2, 0.4), epochs=2)
+    report = estimate.info["report"]
+    assert estimate.horizon_s in (0.2, 0.4) and 0 <= estimate.margin < 1
+    assert sum(row["states"] for row in report["reliability"]) > 0
+    assert {c["horizon_s"] for c in estimate.info["choices"]} == {0.2, 0.4}
+    save_survival(library, estimate, data=path)
+    loaded = load_survival(library, setup.gaits)
+    assert (loaded.horizon_s, loaded.margin, loaded.platt) == (estimate.horizon_s, estimate.margin, estimate.platt)
+    shown = subprocess.run([sys.executable, "-m", "gaitlib.cli", "library", "--library", str(library.root), "--json"],
+                           capture_output=True, text=True, check=True)
+    assert json.loads(shown.stdout)["survival"]["state"] == "current"
+    stale = dict(identities) | {setup.gaits[0]: "0" * 64}
+    estimate.identities = stale
+    save_survival(library, estimate, data=path)
+    with pytest.raises(GaitlibError, match="other policies"):
+        load_survival(library, setup.gaits)
+
+
+def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
+    path = recorded[0]
+    for bad in ({"horizon_s": 0.0}, {"horizon_s": 6.0}, {"margin": 1.0}, {"margin": -0.1}):
+        with pytest.raises(GaitlibError, match="horizon|margin"):
+            check_guard(**bad)
+    run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "fit", str(path), "--library",
+                          str(tmp_path / "nothing"), "--margin", "1.5"], capture_output=True, text=True)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1 and "margin" in run.stderr
+    assert not (tmp_path / "nothing").exists()
