@@ -26,6 +26,7 @@ from gaitlib.gaits import (
     save_motion_file,
 )
 from gaitlib.gaits.feasibility import check_reference
+from gaitlib.library import Library
 from gaitlib.robots.a1 import constants as c
 from gaitlib.rotations import quat_from_yaw, quat_multiply, yaw_of
 from gaitlib.sim import make_backend
@@ -236,8 +237,10 @@ def test_a_turning_gait_trains_in_a_short_smoke_run(tmp_path) -> None:
     run = gaitlib_quick("train", "trot_left", "--preset", "tiny", "--iterations", "2", "--eval-episodes", "1",
                         "--backend", "mujoco", "--library", str(tmp_path / "lib"), "--run-dir", str(tmp_path / "run"))
     assert run.returncode == 0, run.stderr
-    entry = tmp_path / "lib" / "trot_left" / "metadata.json"
-    assert '"yaw_rate": 0.5' in entry.read_text()
+    entry = Library(tmp_path / "lib").entry("trot_left")  # read back and checked, its deployment block included
+    assert entry.description == get_gait("trot_left") and entry.clip.cycle_yaw == pytest.approx(0.25)
+    assert entry.metadata["description"]["yaw_rate"] == 0.5 and "lateral_speed" not in entry.metadata["description"]
+    assert entry.metadata["deployment"]["reference"]["cycle_yaw"]["value"] == pytest.approx(0.25)
 
 
 def test_a_turning_clip_survives_a_motion_file(tmp_path) -> None:
