@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+from pathlib import Path
 
 import pytest
 import torch
@@ -108,3 +109,19 @@ def test_advice_for_a_truncated_checkpoint_does_not_contradict_itself(started, t
         assert "is unreadable" in refused.stderr and advice in refused.stderr
         assert "--resume" not in refused.stderr and "afresh" not in refused.stderr
     assert not (tmp_path / "lib").exists()
+
+
+def test_the_command_line_refuses_a_changed_gait_file_in_one_line(started, states_files, tmp_path) -> None:
+    from gaitlib import gaits
+
+    shutil.copytree(started / "runs", tmp_path / "runs")
+    shipped = (Path(gaits.__file__).parent / "descriptions" / "stand.toml").read_text()
+    taller = tmp_path / "stand.toml"
+    taller.write_text(shipped.replace("body_height = 0.26", "body_height = 0.30"))
+    assert taller.read_text() != shipped
+    refused = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "2", "--resume", "--gait-file",
+                            str(taller), "--states", str(states_files[0]), "--switch-start", "0.4", "--library",
+                            str(started / "library"), "--run-dir", str(tmp_path / "runs" / "stand"), "--backend",
+                            "mujoco")
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1, refused.stderr
+    assert "--gait-file: body_height 0.26 then, 0.3 now" in refused.stderr

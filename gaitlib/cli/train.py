@@ -130,7 +130,7 @@ def train_command(
     from gaitlib.training.distributed import Ranks
     from gaitlib.training.recipe import Recipe
     from gaitlib.training.target import check_target
-    from gaitlib.training.trainer import TrainRequest, train_gait
+    from gaitlib.training.trainer import TrainRequest, resume_point, train_gait
 
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
@@ -159,6 +159,7 @@ def train_command(
         eval_episodes=eval_episodes,
         recipe=recipe,
     )
+    resume_point(request)  # a checkpoint of another run, or none: one line, before the notes below
     if not Ranks.from_env().main:  # under torchrun, rank 0 alone reports
         train_gait(request)
         return
