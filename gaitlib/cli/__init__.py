@@ -8,7 +8,7 @@ from importlib.metadata import version
 
 import typer
 
-from gaitlib.cli import gaits, library, survival, switching, throughput, train, transitions
+from gaitlib.cli import drive, gaits, library, survival, switching, throughput, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -49,6 +49,7 @@ app.command("map")(transitions.map_command)
 app.command("benchmark")(switching.benchmark_command)
 app.command("run")(switching.run_command)
 app.command("routes")(switching.routes_command)
+app.command("drive")(drive.drive_command)
 app.add_typer(throughput.app, name="throughput")
 app.add_typer(survival.app, name="survival")
 

@@ -1,5 +1,6 @@
-"""One robot, a sequence of requested switches: what ``gaitlib run`` does, recorded step by step for the plot and
-the video."""
+"""One robot, requested switches recorded step by step for the plots and the video: a sequence of gaits, each
+requested a hold after the switch before (``gaitlib run``), or a timeline of gaits requested at set times
+(``gaitlib drive``)."""
 
 from __future__ import annotations
 
@@ -15,12 +16,12 @@ from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
 from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
-from gaitlib.meta.controller import DEADLINE_S, MetaStep, SwitchEvent
+from gaitlib.meta.controller import DEADLINE_S, MetaController, MetaStep, SwitchEvent
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.meta.trials import SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.sim import make_backend
 
-__all__ = ["RunTrace", "run_episode"]
+__all__ = ["RunTrace", "drive_episode", "run_episode"]
 
 
 @dataclass
@@ -65,6 +66,8 @@ class RunTrace:
     """The switches made, in order."""
     fell_s: float | None = None
     """When the robot fell (the run stops there), s; ``None`` if it stayed up."""
+    start_qpos: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(7 + joints,) generalized positions at the start, before the first step (as :attr:`qpos`)."""
 
     @property
     def stayed_up(self) -> bool:
@@ -151,23 +154,87 @@ def run_episode(
         )
         rows: dict[str, list] = {name: [] for name in _ROWS}
         trials = SwitchTrials(ctl, protocol, _Sequence(pairs), seed=seed)
+        trace.start_qpos = _qpos(env)
         tail = round(lead_s / env.dt)
         while trials.running or tail > 0:
             if trials.running:
                 result = trials.step()
             else:
                 result, tail = ctl.step(), tail - 1
-            trace.switches += result.events
-            if bool(result.fell[0]):
-                trace.fell_s = ctl.steps * env.dt
+            if not _take(trace, rows, ctl, result):
                 break
-            _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]))  # switched before acting
             if int(ctl.queued[0]) >= 0 and len(trace.requests_s) == len(trace.switches):
                 trace.requests_s.append(ctl.steps * env.dt)  # requested at the end of this step
         _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
         return trace
     finally:
         sim.close()
+
+
+def drive_episode(
+    setup: SwitchingSetup,
+    *,
+    timeline: Sequence[tuple[float, str]],
+    end_s: float,
+    strategy: str = DEFAULT_STRATEGY,
+    deadline_s: float = DEADLINE_S,
+    action_delay: int | None = None,
+    backend: str = "auto",
+    seed: int = 0,
+    falls: str = DEFAULT_FALLS,
+) -> RunTrace:
+    """One robot driven by a timeline of (time s, gait) from 0 s: it starts in the first gait (reference state
+    initialization at a random phase, fresh Table 1 randomization); at each later time its gait is requested from
+    the meta-controller, which ``strategy`` switches as in :func:`run_episode` (a gait already requested, or
+    active, is not requested again; the active one cancels a request still waiting). The run ends at ``end_s``, or
+    at a fall. No pushes. ``action_delay``, ``seed`` and ``falls``: as :func:`run_episode`'s."""
+    times = [t for t, _ in timeline]
+    if not timeline or times[0] != 0 or any(b <= a for a, b in pairwise(times)) or not end_s > times[-1]:
+        raise GaitlibError("a drive's timeline starts at 0 s, its times increase, and it ends after the last one")
+    gaits = [setup.gait_index(g) for _, g in timeline]  # unknown names: one line each
+    sim = make_backend(backend, num_worlds=1)
+    try:
+        cfg = EnvConfig(episode_seconds=end_s + 1.0, termination=TerminationConfig().counting(falls))
+        env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
+        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
+        env.reset_worlds(torch.zeros(1, dtype=torch.long, device=env.device),
+                         gait=torch.full((1,), gaits[0], dtype=torch.long, device=env.device))
+        trace = RunTrace(gaits=setup.gaits, source=setup.gaits[gaits[0]], dests=(), strategy=strategy,
+                         thresholds=(), dt=env.dt, push_n=0.0, falls=falls)
+        trace.start_qpos = _qpos(env)
+        rows: dict[str, list] = {name: [] for name in _ROWS}
+        due = [round(t / env.dt) for t in times]
+        world = torch.zeros(1, dtype=torch.long, device=env.device)
+        wanted, k = gaits[0], 1
+        for step in range(round(end_s / env.dt)):
+            while k < len(due) and due[k] <= step:
+                if gaits[k] != wanted:
+                    wanted = gaits[k]
+                    if wanted == int(env.gait[0]):
+                        ctl.cancel(world)
+                    else:
+                        ctl.request(world, wanted)
+                        trace.requests_s.append(step * env.dt)
+                        trace.dests += (setup.gaits[wanted],)
+                k += 1
+            if not _take(trace, rows, ctl, ctl.step()):
+                break
+        _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
+        return trace
+    finally:
+        sim.close()
+
+
+def _take(trace: RunTrace, rows: dict[str, list], ctl: MetaController, result: MetaStep) -> bool:
+    """Take the single world's controller step ``result`` into ``trace`` and ``rows``; False at a fall (the run
+    stops there)."""
+    env = ctl.env
+    trace.switches += result.events
+    if bool(result.fell[0]):
+        trace.fell_s = ctl.steps * env.dt
+        return False
+    _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]))  # switched before acting
+    return True
 
 
 class _Sequence(TrialSchedule):
@@ -220,7 +287,13 @@ def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_
     rows["push"].append(float(env.push_force[0].norm()))
     rows["foot_contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
     rows["touch"].append(bool(result.touch[0]))
-    rows["qpos"].append(torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy())
+    rows["qpos"].append(_qpos(env))
+
+
+def _qpos(env: ImitationEnv) -> np.ndarray:
+    """The single world's generalized positions now: trunk position, quaternion w-x-y-z, joints."""
+    s = env.sim_state
+    return torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).cpu().numpy()
 
 
 def _fill(trace: RunTrace, rows: dict[str, list], *, legs: int, qpos_size: int) -> None:

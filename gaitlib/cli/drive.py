@@ -1,0 +1,138 @@
+"""``gaitlib drive``: one robot steered by a command timeline or through waypoints, each command requesting the
+library's nearest skill through the meta-controller, with the path against the commanded one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from gaitlib.atomic import json_text
+from gaitlib.cli.options import DELAY_STEPS, SEED, bounded, falls_option
+from gaitlib.defaults import DEFAULT_STRATEGY
+
+__all__ = ["drive_command"]
+
+
+def drive_command(
+    commands: Path | None = typer.Option(
+        None, "--commands", help="Command timeline, CSV with the header time_s,forward,lateral,yaw_rate (s, m/s, m/s, "
+        "rad/s): each row in force until the next, the first at 0 s, the last row's time ending the drive."
+    ),
+    waypoints: Path | None = typer.Option(
+        None, "--waypoints", help="Waypoints, CSV with the header x,y (m): the first where the robot starts, facing "
+        "+x; it turns in place toward each next point, then goes straight to it (docs/driving.md)."
+    ),
+    strategy: str = typer.Option(
+        DEFAULT_STRATEGY, "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
+    ),
+    action_delay: int | None = bounded(
+        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
+        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
+    ),
+    seed: int = bounded(0, "--seed", help="Random seed (randomization, strategy);", bounds=SEED),
+    plot: Path = typer.Option(Path("drive.png"), "--plot", help="Where to write the plot (PNG)."),
+    video: Path | None = typer.Option(None, "--video", help="Also render a video of the drive (MP4)."),
+    backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
+    falls: str = falls_option(),
+) -> None:
+    """Drive one robot by --commands (or through --waypoints): at each command the skill nearest the commanded
+    velocity is requested and the meta-controller switches to it with --strategy."""
+    from gaitlib.cli.options import OptionError, check_out_file
+    from gaitlib.meta import load_switching
+    from gaitlib.meta.commands import read_commands, read_waypoints, skills_of, waypoint_commands
+    from gaitlib.meta.drive import drive
+    from gaitlib.meta.drive_plot import plot_drive
+
+    if (commands is None) == (waypoints is None):
+        raise OptionError("gaitlib drive takes one of --commands FILE.csv or --waypoints FILE.csv")
+    check_out_file("--plot", plot)
+    if video is not None:
+        check_out_file("--video", video)
+    points = read_waypoints(waypoints) if waypoints is not None else None
+    timeline = read_commands(commands) if commands is not None else None
+    setup = load_switching(library)
+    if points is not None:
+        timeline = waypoint_commands(points, skills_of([e.description for e in setup.entries]))
+    result = drive(setup, timeline, strategy=strategy, action_delay=action_delay, backend=backend, seed=seed,
+                   falls=falls)
+    plot_drive(result, plot)
+    if video is not None:
+        from gaitlib.meta.video import render_trace
+
+        render_trace(result.trace, video)
+    report = _report(result, setup.gaits, source=str(commands or waypoints), plot=plot, video=video)
+    if as_json:
+        print(json_text(report))
+        return
+    for row in report["commands"]:
+        achieved = row["achieved"]
+        got = "not run" if achieved is None else (
+            f"achieved {achieved['forward']:+.2f} m/s, {achieved['lateral']:+.2f} m/s, {achieved['yaw_rate']:+.2f} "
+            "rad/s")
+        print(f"{row['from_s']:7.2f} s  forward {row['forward']:+.2f} m/s, lateral {row['lateral']:+.2f} m/s, yaw rate "
+              f"{row['yaw_rate']:+.2f} rad/s -> {row['skill']} ({row['skill_distance']:.3f} m/s away); {got}")
+    for switch in report["switches"]:
+        how = "forced by the deadline" if switch["forced"] else (
+            "random: no score" if switch["score"] is None else f"score {switch['score']:.3f}")
+        print(f"{switch['from']} -> {switch['to']}: requested at {switch['request_s']:.2f} s, switched at "
+              f"{switch['switch_s']:.2f} s ({how})")
+    trace = result.trace
+    outcome = "stayed up" if trace.stayed_up else f"FELL at {trace.fell_s:.2f} s"
+    touches = (f"{trace.touches} leg touch(es) ridden through, the longest {trace.longest_touch_s:.2f} s"
+               if trace.touches else "no leg touched the ground")
+    error = report["velocity_error_rms"]
+    print(f"{len(report['switches'])} switch(es) for {len(trace.requests_s)} request(s); the robot {outcome} (falls "
+          f"counted the {trace.falls} way); {touches}")
+    if error["distance"] is not None:
+        print(f"velocity error (rms): forward {error['forward']:.3f} m/s, lateral {error['lateral']:.3f} m/s, yaw rate "
+              f"{error['yaw_rate']:.3f} rad/s; {error['distance']:.3f} m/s by the drive's distance")
+    print(f"ended {report['end_error_m']:.2f} m from the commanded end of a {report['path_length_m']:.2f} m path")
+    print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
+
+
+def _report(result, gaits: tuple[str, ...], *, source: str, plot: Path, video: Path | None) -> dict:
+    """The drive as one JSON-ready dict."""
+    trace, commands = result.trace, result.commands
+    rows = []
+    for i, (forward, lateral, yaw_rate) in enumerate(commands.velocity.tolist()):
+        achieved = result.achieved[i]
+        rows.append({
+            "from_s": float(commands.time_s[i]), "until_s": float(commands.time_s[i + 1]),
+            "forward": forward, "lateral": lateral, "yaw_rate": yaw_rate,
+            "skill": result.skills[i], "skill_distance": float(result.skill_distance[i]),
+            "achieved": None if achieved[0] != achieved[0] else dict(
+                zip(("forward", "lateral", "yaw_rate"), achieved.tolist(), strict=True)),
+        })
+    switches = [
+        {
+            "from": gaits[event.source], "to": gaits[event.dest], "request_s": switch_s - event.wait_s,
+            "switch_s": switch_s, "wait_s": event.wait_s,
+            "score": None if event.score != event.score else event.score,  # NaN (random): null
+            "phase": event.phase, "forced": event.forced,
+        }
+        for event, switch_s in zip(trace.switches, trace.switches_s, strict=True)
+    ]
+    return {
+        "input": source,
+        "strategy": trace.strategy,
+        "commands": rows,
+        "requests_s": trace.requests_s,
+        "requested": list(trace.dests),
+        "switches": switches,
+        "falls": trace.falls,
+        "stayed_up": trace.stayed_up,
+        "fell_s": trace.fell_s,
+        "touches": trace.touches,
+        "longest_touch_s": trace.longest_touch_s,
+        "velocity_error_rms": result.rms_error(),
+        "path_length_m": result.path_length_m,
+        "end_commanded": result.commanded[-1, 1:3].tolist(),
+        "end_reached": result.pose[-1, 1:3].tolist(),
+        "end_error_m": result.end_error_m,
+        "path": [[round(v, 4) for v in row] for row in result.pose.tolist()],
+        "plot": str(plot),
+        "video": None if video is None else str(video),
+    }
