@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY
+from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY, Falls
 from gaitlib.meta.commands import Commands, distance, nearest_skills, skills_of
 from gaitlib.meta.episode import RunTrace, drive_episode
 from gaitlib.meta.setup import SwitchingSetup
@@ -80,7 +80,7 @@ def drive(
     action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
 ) -> DriveResult:
     """Drive one robot by ``commands`` with ``setup``'s library: each command requests its nearest skill
     (:func:`~gaitlib.meta.commands.nearest_skills`, which refuses a command beyond the library's range before any

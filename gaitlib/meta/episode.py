@@ -181,7 +181,7 @@ def drive_episode(
     action_delay: int | None = None,
     backend: str = "auto",
     seed: int = 0,
-    falls: str = DEFAULT_FALLS,
+    falls: Falls = DEFAULT_FALLS,
 ) -> RunTrace:
     """One robot driven by a timeline of (time s, gait) from 0 s: it starts in the first gait (reference state
     initialization at a random phase, fresh Table 1 randomization); at each later time its gait is requested from
