@@ -141,3 +141,23 @@ def test_drive_takes_commands_or_waypoints_not_both(tmp_path) -> None:
     for args in ((), ("--commands", str(commands), "--waypoints", str(commands))):
         result = gaitlib_quick("drive", *args)
         assert result.returncode == 2 and "one of --commands FILE.csv or --waypoints FILE.csv" in result.stderr
+
+
+def test_a_drive_s_video_is_rendered_as_a_run_s_or_refused_in_one_line(tmp_path) -> None:
+    import importlib.util
+
+    commands = _write(tmp_path / "c.csv", HEADER + "0,1.4,0,0\n0.3,0,0,0\n")
+    video = tmp_path / "drive.mp4"
+    result = gaitlib_quick("drive", "--commands", str(commands), "--plot", str(tmp_path / "d.png"), "--video",
+                           str(video), "--backend", "mujoco", "--json")
+    if importlib.util.find_spec("imageio") is None:  # the run's refusal, after the drive, nothing left behind
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and "pip install 'gaitlib[video]'" in lines[0]
+        assert not video.exists() and not list(tmp_path.glob(".drive.mp4*"))
+    elif result.returncode == 0:
+        import imageio
+
+        assert imageio.get_reader(video).count_frames() == 9  # 0.3 s at 30 Hz
+        assert json.loads(result.stdout)["video"] == str(video)
+    else:  # imageio without headless OpenGL
+        assert result.returncode == 2 and "no headless OpenGL" in result.stderr

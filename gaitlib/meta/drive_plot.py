@@ -73,9 +73,10 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
 def _smoothed(pose: np.ndarray) -> np.ndarray:
     """(T, 3) :func:`~gaitlib.meta.drive.step_velocity` as a moving mean over :data:`_SMOOTH_S`."""
     raw = step_velocity(pose)
-    if len(raw) == 0:
+    if len(raw) == 0:  # a fall in the first step
         return raw
     width = max(1, round(_SMOOTH_S / (pose[1, 0] - pose[0, 0])))
-    kernel = np.ones(width) / width
-    counts = np.convolve(np.ones(len(raw)), kernel, mode="same")
-    return np.column_stack([np.convolve(raw[:, k], kernel, mode="same") / counts for k in range(3)])
+    sums = np.vstack([np.zeros((1, 3)), np.cumsum(raw, axis=0)])
+    start = np.clip(np.arange(len(raw)) - width // 2, 0, len(raw))
+    stop = np.clip(start + width, 0, len(raw))
+    return (sums[stop] - sums[start]) / (stop - start)[:, None]
