@@ -64,13 +64,20 @@ def run_command(
     routed: bool = typer.Option(False, "--routed", help="Make each switch through another gait where the library's "
                                 "route table (gaitlib routes) measured that better."),
     falls: str = falls_option(),
+    guard: bool = typer.Option(True, "--guard/--no-guard", help="Let the guard catch the robot where another gait "
+                               "offers clearly more than staying (docs/switching.md, \"The guard\"); a library "
+                               "without a survival estimate runs unguarded and says so."),
+    guard_margin: float | None = typer.Option(None, "--guard-margin", help="The guard's margin, in [0, 1) "
+                                              "(default: the one chosen with the library's survival estimate)."),
 ) -> None:
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
-    with --strategy."""
+    with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError, check_out_file
+    from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
+    from gaitlib.strategies.survival import check_guard
 
     sequence = [g.strip() for g in dests.split(",")]
     if "" in sequence:
@@ -78,7 +85,16 @@ def run_command(
     check_out_file("--plot", plot)
     if video is not None:
         check_out_file("--video", video)
+    check_guard(margin=guard_margin)
     setup = load_switching(library)
+    guarding, unguarded = None, None if guard else "unguarded (--no-guard)"
+    if guard:
+        try:
+            guarding = setup.guard(margin=guard_margin)
+        except GaitlibError as why:  # a library fitted before the guard existed, or a stale estimate
+            unguarded = f"unguarded: {why}"
+    if unguarded and not as_json:
+        print(unguarded)
     asked = sequence
     if routed:
         table = _route_table(setup, strategies=(strategy,), pushes=(push,), falls=falls)
@@ -95,6 +111,7 @@ def run_command(
         backend=backend,
         seed=seed,
         falls=falls,
+        guard=guarding,
     )
     plot_trace(trace, plot)
     if video is not None:
@@ -128,6 +145,7 @@ def run_command(
         "longest_touch_s": trace.longest_touch_s,
         "plot": str(plot),
         "video": None if video is None else str(video),
+        "guard": _guard_report(trace, setup.gaits, unguarded),
     }
     if as_json:
         print(json_text(report))
@@ -148,7 +166,26 @@ def run_command(
                if trace.touches else "no leg touched the ground")
     print(f"{' -> '.join((source, *sequence))} with {strategy}: {len(switches)} of {len(sequence)} switch(es) made; "
           f"the robot {outcome} (falls counted the {trace.falls} way); {touches}")
+    for catch in report["guard"]["catches"]:
+        back = "not yet" if catch["back_after_s"] is None else f"after {catch['back_after_s']:.2f} s"
+        print(f"guard caught {catch['from']} -> {catch['to']} at {catch['time_s']:.2f} s (staying {catch['stay']:.3f}, "
+              f"switching {catch['offer']:.3f}); {catch['requested']} ran again {back}")
+    if guarding is not None:
+        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
+              f"{len(trace.catches)} catch(es)")
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
+
+
+def _guard_report(trace, gaits: tuple[str, ...], unguarded: str | None) -> dict:
+    """Whether the guard was on (and why not), its margin, and each catch: when, from which gait to which, what
+    the estimate and the net read, and how long until the requested gait ran again."""
+    catches = [
+        {"time_s": c.step * trace.dt, "from": gaits[c.source], "to": gaits[c.dest], "phase": c.phase,
+         "stay": c.stay, "offer": c.offer, "requested": gaits[c.requested],
+         "back_after_s": None if c.back_step is None else (c.back_step - c.step) * trace.dt}
+        for c in trace.catches
+    ]
+    return {"on": trace.guarded, "margin": trace.guard_margin, "why_off": unguarded, "catches": catches}
 
 
 def benchmark_command(

@@ -9,13 +9,14 @@ policies given, in the same order.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import torch
 
 from gaitlib.envs import ImitationEnv
 from gaitlib.library.policy import GaitPolicy, per_gait
+from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
 
 if TYPE_CHECKING:
@@ -85,6 +86,8 @@ class MetaStep:
     touch: torch.Tensor
     """(N,) bool: a non-foot body (a leg's, or the trunk) was on the ground at the end of this step, before any
     reset: a fall by the ``contact`` definition, a touch ridden through by the ``trunk`` one."""
+    catches: list[CatchEvent] = field(default_factory=list)
+    """The guard's catches at this step (made before the policies acted)."""
 
 
 class MetaController:
@@ -99,9 +102,11 @@ class MetaController:
         typical_value: torch.Tensor | None = None,
         deadline_s: float = DEADLINE_S,
         candidates: int | None = None,
+        guard: Guard | None = None,
     ) -> None:
         """``policies[g]`` drives ``env``'s gait g. ``typical_value`` (G,) divides destination critic values for
-        strategies that need values (required by them)."""
+        strategies that need values (required by them). ``guard``: catch worlds about to fall
+        (:mod:`gaitlib.meta.guard`); ``None``: unguarded."""
         if len(policies) != len(env.clips):
             raise ValueError(f"{len(policies)} policies for an environment of {len(env.clips)} gaits")
         if strategy.needs_value and typical_value is None:
@@ -117,6 +122,15 @@ class MetaController:
         """(N,) the queued gait of each world, -1 for none."""
         self.waited = torch.zeros(n, dtype=torch.long, device=env.device)
         """(N,) control steps each queued request has waited."""
+        self.guard = guard
+        self.requested = torch.full((n,), -1, dtype=torch.long, device=env.device)
+        """(N,) the gait a caught world returns to, -1 where none is pending."""
+        self.hold = torch.zeros(n, dtype=torch.long, device=env.device)
+        """(N,) control steps a caught world still holds the gait it was caught into."""
+        self._hold_steps = round(guard.horizon_s / env.dt) if guard is not None else 0
+        self.stay = torch.full((n,), float("nan"), device=env.device)
+        """(N,) the survival estimate the guard read at the last step (NaN unguarded)."""
+        self._pending: dict[int, CatchEvent] = {}  # world -> its last catch, until the requested gait runs again
         self.steps = 0
         self.on_switch: Callable[[SwitchDetail], None] | None = None
         """Called with each step's switches right after they are made (before the policies act)."""
@@ -131,6 +145,9 @@ class MetaController:
         world_ids = torch.as_tensor(world_ids, device=self.env.device).reshape(-1)
         self.queued[world_ids] = torch.as_tensor(gait, device=self.env.device)
         self.waited[world_ids] = 0
+        self.requested[world_ids] = -1  # the new request is what a caught world now returns to
+        for world in world_ids.tolist():
+            self._pending.pop(world, None)
 
     def cancel(self, world_ids: torch.Tensor) -> None:
         """Drop the queued requests of ``world_ids``."""
@@ -142,9 +159,16 @@ class MetaController:
         n = env.num_envs
         best_score = torch.full((n,), float("nan"), device=env.device)
         best_phase = torch.full((n,), float("nan"), device=env.device)
-        waiting = (self.queued >= 0) & (self.queued != env.gait)
-        self.queued[(self.queued >= 0) & ~waiting] = -1  # a request for the active gait is already met
         events: list[SwitchEvent] = []
+        catches = self._guard(events) if self.guard is not None else []
+        waiting = (self.queued >= 0) & (self.queued != env.gait)
+        for world in ((self.queued >= 0) & ~waiting).nonzero().squeeze(1).tolist():  # already met (a catch into it)
+            gait = int(env.gait[world])
+            events.append(SwitchEvent(world=world, step=self.steps, source=gait, dest=gait,
+                                      phase=float(env.phase[world]), score=float("nan"), forced=False,
+                                      wait_s=float(self.waited[world]) * env.dt))
+        self.queued[(self.queued >= 0) & ~waiting] = -1
+        waiting &= self.hold <= 0  # a caught world holds its new gait first
         ids = waiting.nonzero().squeeze(1)
         if len(ids):
             decision, query, before = self._decide(ids)
@@ -182,7 +206,72 @@ class MetaController:
         self.queued[dones] = -1
         self.waited[self.queued >= 0] += 1
         self.steps += 1
-        return MetaStep(actions, fell, events, waiting, best_score, best_phase, extras["touch"].to(fell.device))
+        if self.guard is not None:
+            self._return(dones)
+        return MetaStep(actions, fell, events, waiting, best_score, best_phase, extras["touch"].to(fell.device),
+                        catches)
+
+    def _guard(self, events: list[SwitchEvent]) -> list[CatchEvent]:
+        """Catch every world whose best offer beats staying by more than the margin, at once (not one that still
+        holds the gait of its last catch: the net's offer already counted the horizon after that switch); a catch
+        into the queued gait is that request's switch (an event of ``events``)."""
+        env = self.env
+        ids = torch.arange(env.num_envs, device=env.device)
+        reading = self.guard.read(env, self.policies, ids, self.candidates)
+        fire = self.guard.fires(reading) & (self.hold <= 0)  # a caught world holds its new gait for the horizon
+        self.stay = reading.stay
+        if not fire.any():
+            return []
+        chosen = fire.nonzero().squeeze(1)
+        best, dest = reading.best()
+        dest, phase, source = dest[chosen], reading.phase[chosen, dest[chosen]], env.gait[chosen].clone()
+        phase_source = env.phase[chosen].clone()
+        obs = env.get_observations()[chosen]
+        requested = torch.where(self.queued[chosen] >= 0, self.queued[chosen], self.requested[chosen])
+        requested = torch.where(requested >= 0, requested, source)
+        env.switch(chosen, dest, phase)
+        met = requested == dest
+        if met.any() and self.on_switch is not None:
+            self.on_switch(SwitchDetail(world=chosen[met], source=source[met], dest=dest[met],
+                                        phase_source=phase_source[met],
+                                        phase_dest=phase[met], latent=reading.latent[chosen][met],
+                                        observation=obs[met]))
+        catches = []
+        for i, world in enumerate(chosen.tolist()):
+            catch = CatchEvent(world=world, step=self.steps, source=int(source[i]), dest=int(dest[i]),
+                               phase=float(phase[i]), stay=float(reading.stay[world]), offer=float(best[world]),
+                               requested=int(requested[i]))
+            catches.append(catch)
+            if met[i]:
+                catch.back_step = self.steps
+                if int(self.queued[world]) >= 0:  # the request's switch, made by the guard
+                    events.append(SwitchEvent(world=world, step=self.steps, source=catch.source, dest=catch.dest,
+                                              phase=catch.phase, score=catch.offer, forced=False,
+                                              wait_s=float(self.waited[world]) * env.dt))
+                self.queued[world], self.requested[world] = -1, -1
+                self._pending.pop(world, None)
+            else:
+                self.requested[world], self._pending[world] = catch.requested, catch
+                self.queued[world] = -1
+                self.hold[world] = self._hold_steps
+        return catches
+
+    def _return(self, dones: torch.Tensor) -> None:
+        """Count down the holds; request the gait a caught world returns to once its hold is over; note when it
+        runs again. A world that ended its episode forgets its catch."""
+        env = self.env
+        self.hold = (self.hold - 1).clamp(min=0)
+        self.hold[dones] = 0
+        self.requested[dones] = -1
+        for world in dones.nonzero().squeeze(1).tolist():
+            self._pending.pop(world, None)
+        for world, catch in list(self._pending.items()):
+            if int(env.gait[world]) == catch.requested:
+                catch.back_step = self.steps
+                del self._pending[world]
+                self.requested[world] = -1
+            elif int(self.hold[world]) == 0 and int(self.queued[world]) < 0:
+                self.queued[world], self.waited[world] = catch.requested, 0
 
     def _decide(self, ids: torch.Tensor):
         env = self.env

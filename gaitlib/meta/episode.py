@@ -17,6 +17,7 @@ from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
 from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
 from gaitlib.meta.controller import DEADLINE_S, MetaController, MetaStep, SwitchEvent
+from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.meta.trials import SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.sim import make_backend
@@ -68,6 +69,14 @@ class RunTrace:
     """When the robot fell (the run stops there), s; ``None`` if it stayed up."""
     start_qpos: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(7 + joints,) generalized positions at the start, before the first step (as :attr:`qpos`)."""
+    guarded: bool = False
+    """Whether the guard was on (:mod:`gaitlib.meta.guard`)."""
+    guard_margin: float | None = None
+    """The guard's margin (``None``: unguarded)."""
+    stay: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(T,) the guard's survival estimate of keeping the running gait at each step (NaN unguarded)."""
+    catches: list[CatchEvent] = field(default_factory=list)
+    """The guard's catches, in order."""
 
     @property
     def stayed_up(self) -> bool:
@@ -107,6 +116,7 @@ def run_episode(
     backend: str = "auto",
     seed: int = 0,
     falls: Falls = DEFAULT_FALLS,
+    guard: Guard | None = None,
 ) -> RunTrace:
     """Switch trials of :mod:`gaitlib.meta.trials`, chained on one robot: run ``source``, request ``dests[0]`` at
     ``request_s``, let ``strategy`` switch; ``hold_s`` after the end of that switch's control step request the next
@@ -114,7 +124,8 @@ def run_episode(
     (random direction, 0.1-0.3 s, a quiet 0.2-1.0 s before each) hit the robot from ``DISTURBANCE_LEAD_S`` before
     each request until ``deadline_s`` after it (the benchmark's window). ``action_delay``: every action waits
     exactly this many control steps (``None``: the policies' trained random delay). ``falls``: what ends the run as
-    a fall (:class:`gaitlib.defaults.Falls`); touches are recorded either way."""
+    a fall (:class:`gaitlib.defaults.Falls`); touches are recorded either way. ``guard``: the guard
+    catches the robot where another gait offers clearly more than staying (``None``: unguarded)."""
     dests = (dests,) if isinstance(dests, str) else tuple(dests)
     gaits = [setup.gait_index(g) for g in (source, *dests)]  # unknown names: one line each
     if not dests:
@@ -140,7 +151,7 @@ def run_episode(
         seconds = request_s + len(pairs) * (deadline_s + hold_s) + 1.0
         cfg = EnvConfig(episode_seconds=seconds, pushes=pushes, termination=TerminationConfig().counting(falls))
         env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
-        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
+        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed, guard=guard)
         threshold = None if strategy == "random" else ctl.strategy.threshold
         trace = RunTrace(
             gaits=setup.gaits,
@@ -151,6 +162,8 @@ def run_episode(
             dt=env.dt,
             push_n=push_n,
             falls=falls,
+            guarded=guard is not None,
+            guard_margin=None if guard is None else guard.margin,
         )
         rows: dict[str, list] = {name: [] for name in _ROWS}
         trials = SwitchTrials(ctl, protocol, _Sequence(pairs), seed=seed)
@@ -230,10 +243,12 @@ def _take(trace: RunTrace, rows: dict[str, list], ctl: MetaController, result: M
     stops there)."""
     env = ctl.env
     trace.switches += result.events
+    trace.catches += result.catches
     if bool(result.fell[0]):
         trace.fell_s = ctl.steps * env.dt
         return False
-    _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]))  # switched before acting
+    _record(rows, env, result, time_s=ctl.steps * env.dt, active=int(env.gait[0]),  # switched before acting
+            stay=float(ctl.stay[0]))
     return True
 
 
@@ -272,13 +287,15 @@ def _pair_threshold(threshold: float | dict | None, pair: tuple[int, int]) -> fl
     return threshold.get(pair) if isinstance(threshold, dict) else threshold
 
 
-_ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "touch", "qpos")
+_ROWS = ("time_s", "active", "score", "best_phase", "root_height", "push", "foot_contact", "touch", "qpos", "stay")
 """The per-step fields of :class:`RunTrace`."""
 
 
-def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_s: float, active: int) -> None:
+def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_s: float, active: int,
+            stay: float) -> None:
     """Append one control step of the single world to ``rows``."""
     s = env.sim_state
+    rows["stay"].append(stay)
     rows["time_s"].append(time_s)
     rows["active"].append(active)
     rows["score"].append(float(result.best_score[0]))

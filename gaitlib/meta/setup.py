@@ -14,6 +14,7 @@ from gaitlib.errors import GaitlibError, UnknownNameError
 from gaitlib.library import LibraryStatus, library_status
 from gaitlib.library.store import Library, LibraryEntry
 from gaitlib.meta.controller import DEADLINE_S, MetaController
+from gaitlib.meta.guard import Guard
 from gaitlib.sim import SimBackend
 from gaitlib.strategies import SwitchResources, get_strategy
 
@@ -60,17 +61,28 @@ class SwitchingSetup:
             cfg = dataclasses.replace(cfg, randomization=randomization)
         return ImitationEnv(sim, [e.clip for e in self.entries], cfg, seed=seed)
 
+    def guard(self, *, margin: float | None = None) -> Guard:
+        """The library's guard (its survival estimate and calibrated transition-net; ``margin``: instead of the
+        one chosen with the estimate); one line, before any work, for a library without a survival estimate, a
+        stale one, or a margin out of range."""
+        from gaitlib.strategies.survival import check_guard, load_survival
+
+        check_guard(margin=margin)
+        estimate = load_survival(self.resources.library, self.gaits)
+        return Guard(estimate, get_strategy("net-lookahead", self.resources), margin=margin)
+
     def controller(
-        self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0
+        self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0,
+        guard: Guard | None = None,
     ) -> MetaController:
         """A meta-controller over ``env`` (made by :meth:`make_env`) switching with strategy ``strategy`` (``seed``:
-        its random choices)."""
+        its random choices), guarded by ``guard`` (:meth:`guard`) when given."""
         chosen = get_strategy(strategy, dataclasses.replace(self.resources, seed=seed))
         typical = (
             torch.as_tensor(self.resources.table.typical_value, dtype=torch.float32) if chosen.needs_value else None
         )
         policies = [e.policy.to(env.device) for e in self.entries]
-        return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s)
+        return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s, guard=guard)
 
 
 def load_switching(library: Library | Path | None = None) -> SwitchingSetup:

@@ -17,7 +17,8 @@ _FEET = ("FR", "FL", "RR", "RL")
 def plot_trace(trace: RunTrace, path: Path) -> Path:
     """Write ``trace`` as a three-panel PNG (atomically): the strategy's best score and its destination phase
     while a request waits (its pair's threshold dashed), trunk height with the pushes shaded, and the gait diagram
-    (feet in contact, dark) with the requests and the switches marked."""
+    (feet in contact, dark) with the requests, the switches and the guard's catches marked; guarded, the survival
+    estimate beside the score."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -35,6 +36,8 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
         if threshold is not None and np.isfinite(threshold):
             ax_score.hlines(threshold, request_s, until_s, color="tab:blue", linestyle="--", linewidth=1,
                             label="threshold" if k == 0 else None)
+    if trace.guarded:
+        ax_score.plot(t, trace.stay, color="tab:olive", linewidth=1, label="guard: staying up")
     ax_score.set_ylabel(f"{trace.strategy} score")
     phase_axis = ax_score.twinx()
     phase_axis.plot(t, trace.best_phase, ".", color="tab:orange", markersize=3, label="chosen φn")
@@ -69,14 +72,17 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
             ax.axvline(request_s, color="tab:green", linestyle=":", linewidth=1.5)
         for switch_s in trace.switches_s:
             ax.axvline(switch_s, color="tab:red", linewidth=1.5)
+        for catch in trace.catches:
+            ax.axvline(catch.step * trace.dt, color="tab:orange", linestyle="--", linewidth=1.5)
         if trace.fell_s is not None:
             ax.axvline(trace.fell_s, color="tab:purple", linewidth=1.5)
     outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s (purple)"
     touches = f"{trace.touches} leg touch(es) ridden through" if trace.touches else "no leg touch"
+    guard = (f"guard on, {len(trace.catches)} catch(es) (orange, dashed)" if trace.guarded else "guard off")
     fig.suptitle(
         f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N:\n"
         f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome} "
-        f"(falls: {trace.falls}), {touches}",
+        f"(falls: {trace.falls}), {touches}, {guard}",
         fontsize=10,
     )
     fig.tight_layout()

@@ -30,7 +30,8 @@ from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import platt
 
 __all__ = [
-    "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "check_guard",
+    "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "SurvivalNet",
+    "check_guard",
     "fit_survival", "load_survival", "save_survival", "survival_features",
 ]
 
@@ -76,7 +77,7 @@ def survival_features(inputs: tuple[str, ...], gaits: int, *, gait: torch.Tensor
     return torch.cat(parts, dim=-1)
 
 
-class _Net(torch.nn.Module):
+class SurvivalNet(torch.nn.Module):
     """MLP over standardized inputs, hidden 64-64 with ReLU, one logit."""
 
     def __init__(self, dim: int, hidden: tuple[int, ...] = (64, 64)) -> None:
@@ -108,7 +109,7 @@ class SurvivalEstimate:
     """How much more (probability) an offered switch must promise than staying for the guard to take it."""
     platt: dict[int, tuple[float, float]]
     """Gait index -> Platt's (a, b) on the model's logit."""
-    net: _Net
+    net: SurvivalNet
     info: dict = field(default_factory=dict)
     """How it was fitted and chosen, its reliability table, lead times and false alarms (JSON-ready)."""
 
@@ -149,9 +150,9 @@ def _features(data: dict[str, np.ndarray], inputs: tuple[str, ...], gaits: int, 
                              value=t["value"], explicit=t["explicit"])
 
 
-def _train(x: torch.Tensor, y: torch.Tensor, *, epochs: int, seed: int) -> _Net:
+def _train(x: torch.Tensor, y: torch.Tensor, *, epochs: int, seed: int) -> SurvivalNet:
     torch.manual_seed(seed)
-    net = _Net(x.shape[1])
+    net = SurvivalNet(x.shape[1])
     net.mean.copy_(x.mean(0))
     net.std.copy_(x.std(0, unbiased=False).clamp(min=1e-3))
     optimizer = torch.optim.Adam(net.parameters(), lr=1e-3)
@@ -288,7 +289,7 @@ def load_survival(library: Library, gaits: tuple[str, ...]) -> SurvivalEstimate:
         if {k: meta.get(k) for k in _FORMAT} != _FORMAT:
             raise ValueError("not a gaitlib survival estimate of this version")
         names = tuple(meta["gaits"])
-        net = _Net(int(meta["dim"]))
+        net = SurvivalNet(int(meta["dim"]))
         net.load_state_dict(saved["state_dict"])
         ab = {names.index(name): (float(v[0]), float(v[1])) for name, v in meta["platt"].items()}
         estimate = SurvivalEstimate(names, dict(meta["library_identities"]), tuple(meta["inputs"]),

@@ -1,0 +1,99 @@
+"""The guard: every control step, whether or not a switch is requested, each world's chance of staying up if it
+keeps its gait (the survival estimate, :mod:`gaitlib.strategies.survival`) is compared with what switching now
+offers (the calibrated transition-net at each other gait's best destination phase,
+:meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`); where the best offer beats staying by more than
+the margin, the world switches there at once (a *catch*), without waiting for a better phase. After a catch the
+world holds the gait it was caught into for the estimate's horizon (it is not caught again meanwhile: the net's
+offer already counted the time after that switch), then returns to the requested gait through the
+normal switch (the controller's strategy), which is when it is safe by that strategy's measure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gaitlib.library.policy import GaitPolicy, per_gait
+from gaitlib.strategies.lookahead import LookaheadStrategy
+from gaitlib.strategies.survival import SurvivalEstimate, check_guard, survival_features
+from gaitlib.transitions.explicit import explicit_state
+
+__all__ = ["CatchEvent", "Guard", "GuardReading"]
+
+
+@dataclass
+class CatchEvent:
+    """One catch of the guard."""
+
+    world: int
+    step: int
+    """Controller step at which the catch switched (counted from the controller's creation)."""
+    source: int
+    """Gait caught from."""
+    dest: int
+    """Gait caught into."""
+    phase: float
+    """Destination phase switched to, cycles."""
+    stay: float
+    """The survival estimate of keeping ``source`` at the catch."""
+    offer: float
+    """The calibrated net's success probability of the switch made."""
+    requested: int
+    """The gait requested at the catch (the world returns to it)."""
+    back_step: int | None = None
+    """Controller step at which the requested gait ran again (``None``: not yet, or never)."""
+
+
+@dataclass(frozen=True)
+class GuardReading:
+    """What the guard read of k worlds this step."""
+
+    stay: torch.Tensor
+    """(k,) survival estimate of keeping the gait."""
+    offer: torch.Tensor
+    """(k, G) calibrated success of switching now to each gait at its best phase (NaN on the own gait)."""
+    phase: torch.Tensor
+    """(k, G) that phase, cycles."""
+    latent: torch.Tensor
+    """(k, L) the actors' latents psi_m."""
+
+    def best(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(k,) the best offer and (k,) its gait."""
+        return self.offer.nan_to_num(float("-inf")).max(dim=1)
+
+
+class Guard:
+    """Catches worlds whose gait is about to fail into the gait the net says saves them (module doc)."""
+
+    def __init__(self, estimate: SurvivalEstimate, scorer: LookaheadStrategy, *, margin: float | None = None) -> None:
+        """``margin``: the margin used instead of the one chosen with ``estimate``."""
+        check_guard(margin=margin)
+        self.estimate = estimate
+        self.scorer = scorer
+        self.margin = estimate.margin if margin is None else margin
+        """A switch is taken where it offers more than staying by more than this."""
+
+    @property
+    def horizon_s(self) -> float:
+        """How far ahead the estimate looks, s; a caught world holds its new gait this long before it returns."""
+        return self.estimate.horizon_s
+
+    def read(self, env, policies: list[GaitPolicy], ids: torch.Tensor, candidates: torch.Tensor) -> GuardReading:
+        """What the guard sees of worlds ``ids`` of ``env`` now."""
+        obs = env.get_observations()[ids]
+        gait, phase = env.gait[ids], env.phase[ids]
+        latent = per_gait(policies, gait, obs, method="latent")
+        needs = self.estimate.inputs
+        value = per_gait(policies, gait, obs, method="value").reshape(-1) if "value" in needs else phase
+        explicit = explicit_state(obs["policy"]) if "explicit" in needs else None
+        features = survival_features(needs, len(env.clips), gait=gait, latent=latent, phase=phase, value=value,
+                                     explicit=explicit)
+        stay = self.estimate.probability(features, gait).to(env.device)
+        offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
+        return GuardReading(stay, offer.to(env.device), best_phase.to(env.device), latent)
+
+    def fires(self, reading: GuardReading) -> torch.Tensor:
+        """(k,) bool: the best offer beats staying by more than the margin."""
+        best, _ = reading.best()
+        return best - reading.stay > self.margin

@@ -1,0 +1,105 @@
+"""The guard in the meta-controller: it catches a world whose gait the survival estimate gives up on into the gait
+the calibrated net offers, holds it, returns to the requested gait; it never switches where staying is safe; a
+library without a survival estimate runs unguarded and says so; a margin out of range is refused before work."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from gaitlib.envs import EnvConfig
+from gaitlib.errors import GaitlibError
+from gaitlib.library import Library
+from gaitlib.meta import load_switching
+from gaitlib.meta.guard import Guard
+from gaitlib.sim import make_backend
+from gaitlib.strategies import get_strategy
+from gaitlib.strategies.survival import SurvivalEstimate, SurvivalNet, save_survival
+from tests.conftest import copy_library
+
+
+def _forced(setup, stay: dict[str, float], *, horizon_s: float = 0.2) -> SurvivalEstimate:
+    """An estimate that reads ``stay[gait]`` whatever the state (Platt slope 0, intercept its logit)."""
+    platt = {setup.gaits.index(g): (0.0, float(torch.logit(torch.tensor(p)))) for g, p in stay.items()}
+    dim = len(setup.gaits) + 2
+    return SurvivalEstimate(setup.gaits, setup.resources.library.identities(setup.gaits), ("phase",), horizon_s,
+                            0.0, platt, SurvivalNet(dim))
+
+
+def _run(setup, estimate: SurvivalEstimate, steps: int, *, margin: float):
+    sim = make_backend("mujoco", num_worlds=2)
+    try:
+        env = setup.make_env(sim, EnvConfig(episode_seconds=30.0), seed=0)
+        trot = setup.gait_index("trot")
+        env.reset_worlds(torch.arange(2), gait=torch.full((2,), trot))
+        guard = Guard(estimate, get_strategy("net-lookahead", setup.resources), margin=margin)
+        ctl = setup.controller(env, "net-lookahead", guard=guard)
+        catches, gaits = [], []
+        for _ in range(steps):
+            result = ctl.step()
+            catches += result.catches
+            gaits.append(env.gait.clone())
+        return catches, torch.stack(gaits), ctl
+    finally:
+        sim.close()
+
+
+def test_guard_catches_a_failing_gait_and_returns(switching_library):
+    setup = load_switching(switching_library)
+    stand, trot = setup.gait_index("stand"), setup.gait_index("trot")
+    catches, gaits, ctl = _run(setup, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), 30, margin=0.0)
+    first = [c for c in catches if c.step == 0]
+    assert {c.world for c in first} == {0, 1}  # both caught at once, at the first step
+    assert all((c.source, c.dest, c.requested) == (trot, stand, trot) for c in first)
+    assert all(c.stay == pytest.approx(1e-4, rel=1e-3) and 0 < c.offer <= 1 for c in first)
+    assert (gaits[0] == stand).all()
+    hold = round(0.2 / ctl.env.dt)
+    assert (gaits[1:hold] == stand).all()  # held for the horizon, not caught again meanwhile
+    back = [c for c in first if c.back_step is not None]
+    assert back and all(c.back_step > hold for c in back)  # returned to trot through the normal switch
+    assert (gaits[:, [c.world for c in back]] == trot).any()
+
+
+def test_guard_never_switches_where_staying_is_safe(switching_library):
+    setup = load_switching(switching_library)
+    catches, gaits, _ = _run(setup, _forced(setup, {"trot": 1 - 1e-6, "stand": 1 - 1e-6}), 15, margin=0.05)
+    assert catches == []
+    assert (gaits == setup.gait_index("trot")).all()
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "gaitlib.cli", *args], capture_output=True, text=True)
+
+
+def test_run_without_estimate_is_unguarded_and_says_so(switching_library, tmp_path):
+    common = ["run", "--from", "trot", "--to", "stand", "--request-at", "0.3", "--hold", "0.8", "--backend",
+              "mujoco", "--library", str(switching_library), "--plot", str(tmp_path / "run.png")]
+    run = _cli(*common, "--json")
+    assert run.returncode == 0, run.stderr
+    guard = json.loads(run.stdout)["guard"]
+    assert guard["on"] is False and "no survival estimate" in guard["why_off"] and guard["catches"] == []
+    text = _cli(*common)
+    assert text.returncode == 0 and text.stdout.splitlines()[0].startswith("unguarded: ")
+    refused = _cli(*common, "--guard-margin", "1.5")
+    assert refused.returncode == 2 and "margin" in refused.stderr and refused.stderr.count("\n") == 1
+
+
+def test_guarded_run_reports_and_plots(switching_library, tmp_path):
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"forced")
+    save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
+    with pytest.raises(GaitlibError, match="margin"):
+        setup.guard(margin=-0.5)
+    run = _cli("run", "--from", "trot", "--to", "stand", "--request-at", "0.3", "--hold", "0.8", "--backend",
+               "mujoco", "--library", str(library.root), "--plot", str(tmp_path / "run.png"), "--json")
+    assert run.returncode == 0, run.stderr
+    guard = json.loads(run.stdout)["guard"]
+    assert guard["on"] is True and guard["margin"] == 0.0
+    first = guard["catches"][0]
+    assert (first["from"], first["to"], first["time_s"]) == ("trot", "stand", 0.0)
+    assert (tmp_path / "run.png").stat().st_size > 0
