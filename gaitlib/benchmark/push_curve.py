@@ -63,6 +63,11 @@ class PushPoint:
     falls_definition: Falls = DEFAULT_FALLS
     """What a fall was."""
 
+    guard: dict | None = None
+    """On the meta-controller (:mod:`gaitlib.benchmark.guarded_push`): whether the guard was on, its margin and
+    horizon, each catch, the false catches and detection delays, the share of time the measured gait ran;
+    ``None``: the gait's own policy alone."""
+
     def as_dict(self) -> dict:
         return asdict(self)
 

@@ -9,8 +9,9 @@ import typer
 
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
+from gaitlib.defaults import Falls
 
-__all__ = ["app"]
+__all__ = ["app", "guarded_curve"]
 
 app = typer.Typer(help="The guard's survival estimate: record states before falls and survivals, fit it.")
 
@@ -104,3 +105,58 @@ def fit_command(
     alarms = report["false_alarms_per_min"]
     print(f"false alarms at 0 N: {'-' if alarms is None else f'{alarms:.3f}'} per minute "
           f"(over {report['unshoved_minutes']:.1f} unshoved minutes)")
+
+
+def guarded_curve(gait: str, library: Path | None, impulses, margin: float | None, *, record: bool, episodes: int,
+                   backend: str, seed: int, plot: Path | None, as_json: bool, falls: Falls) -> None:
+    """``gaitlib eval GAIT --impulses ... --guard``: the single-push curve on the meta-controller, unguarded and
+    guarded on the same draws, with the guard's catches."""
+    from gaitlib.benchmark.guarded_push import guarded_push_curve
+    from gaitlib.benchmark.push_curve import write_push_plot
+    from gaitlib.cli.options import OptionError
+    from gaitlib.cli.tables import rate_text
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies.survival import check_guard
+
+    if impulses is None or record:
+        raise OptionError("--guard takes --impulses (and not --record): the guarded figures are the single-push curve")
+    check_guard(margin=margin)
+    setup = load_switching(library)
+    setup.gait_index(gait)
+    guarding = setup.guard(margin=margin)  # no survival estimate, or a stale one: one line, before any work
+    curves = {
+        label: guarded_push_curve(setup, gait, guard=g, impulses=impulses, episodes=episodes, backend=backend,
+                                  seed=seed, falls=falls)
+        for label, g in (("unguarded", None), ("guarded", guarding))
+    }
+    if plot is not None:
+        write_push_plot({f"{gait}, {label}": points for label, points in curves.items()}, plot)
+    if as_json:
+        print(json_text({"gait": gait, "guard": True, "margin": guarding.margin, "horizon_s": guarding.horizon_s,
+                         "points": [p.as_dict() for p in curves["guarded"]],
+                         "unguarded_points": [p.as_dict() for p in curves["unguarded"]]}))
+        return
+    from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
+
+    table = Table(title=f"{gait} on the meta-controller, guard on (margin {guarding.margin:g}, horizon "
+                        f"{guarding.horizon_s:g} s) and off on the same draws: falls ({falls} definition) under one "
+                        f"push of 0.1 s per episode ({episodes} episodes each, 95% interval)")
+    for column in ("impulse N s", "falls unguarded", "falls guarded", "worst sector guarded", "catches",
+                   "false catches", "delay steps (median)", f"{gait} running"):
+        table.add_column(column, justify="right")
+    for off, on in zip(curves["unguarded"], curves["guarded"], strict=True):
+        worst = max(on.by_sector.items(), key=lambda kv: kv[1][0] / max(1, kv[1][1]))
+        delay = on.guard["delay_steps_median"]
+        table.add_row(f"{on.impulse_ns:g}", rate_text(off.fall_rate, off.ci95, digits=1),
+                      rate_text(on.fall_rate, on.ci95, digits=1), f"{worst[0]} {worst[1][0]}/{worst[1][1]}",
+                      str(len(on.guard["catches"])), str(on.guard["false_catches"]),
+                      "-" if delay is None else f"{delay:g}", f"{100 * on.guard['measured_gait_share']:.1f}%")
+    table_console().print(table)
+    for p in curves["guarded"]:
+        for c in p.guard["catches"]:
+            back = "never" if c["back_after_s"] is None else f"after {c['back_after_s']:.2f} s"
+            print(f"{p.impulse_ns:g} N s, world {c['world']}: caught {c['from']} -> {c['to']} at {c['time_s']:.2f} s, "
+                  f"{c['delay_steps']} steps after the shove began (staying {c['stay']:.3f}, switching "
+                  f"{c['offer']:.3f}); {gait} ran again {back}")

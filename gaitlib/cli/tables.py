@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-__all__ = ["print_measures", "table_console"]
+__all__ = ["print_measures", "rate_text", "table_console"]
 
 _LOG_WIDTH = 160
 """Columns of a table printed to a file or a pipe (rich's 80 would cut the names of wide tables), characters."""
@@ -29,3 +29,8 @@ def print_measures(title: str, rows: list[tuple[str, str]], *, header: tuple[str
     for name, value in rows:
         table.add_row(name, value)
     table_console().print(table)
+
+
+def rate_text(rate: float, ci95: tuple[float, float], *, digits: int = 2) -> str:
+    """A rate in percent with its 95% interval, to ``digits`` decimals."""
+    return f"{100 * rate:.{digits}f}% [{100 * ci95[0]:.{digits}f}, {100 * ci95[1]:.{digits}f}]"

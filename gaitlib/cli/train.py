@@ -19,7 +19,7 @@ from gaitlib.cli.options import (
     bounded,
     falls_option,
 )
-from gaitlib.cli.tables import print_measures
+from gaitlib.cli.tables import print_measures, rate_text
 from gaitlib.defaults import SWITCH_START, Falls
 
 __all__ = ["eval_command", "train_command"]
@@ -224,8 +224,8 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
         table.add_column(column, justify="right")
     for p in points:
         sectors = (f"{f}/{k}" for f, k in p.by_sector.values())
-        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", _rate(p.fall_rate, p.ci95, digits=1), *sectors,
-                      _rate(p.touches / p.episodes, p.touch_ci95, digits=1), f"{p.longest_touch_s:.2f}")
+        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate_text(p.fall_rate, p.ci95, digits=1), *sectors,
+                      rate_text(p.touches / p.episodes, p.touch_ci95, digits=1), f"{p.longest_touch_s:.2f}")
     table_console().print(table)
 
 
@@ -238,11 +238,6 @@ def _interval(text: str) -> tuple[float, float]:
     except ValueError:
         raise OptionError(f"--kick-interval takes LOW:HIGH in seconds (e.g. 1:3), got '{text}'") from None
     return low, high
-
-
-def _rate(rate: float, ci95: tuple[float, float], *, digits: int = 2) -> str:
-    """A rate in percent with its 95% interval, to ``digits`` decimals."""
-    return f"{100 * rate:.{digits}f}% [{100 * ci95[0]:.{digits}f}, {100 * ci95[1]:.{digits}f}]"
 
 
 def _say_status(console, library: Path, gait: str) -> None:
@@ -284,9 +279,13 @@ def eval_command(
         "in the library --library names, else $GAITLIB_LIBRARY, else your own runs/library."
     ),
     replace: bool = typer.Option(False, "--replace", help="With --record: into the shipped library (refused without)."),
+    guard: bool = typer.Option(False, "--guard", help="With --impulses: run on the meta-controller with the guard on, "
+                               "beside the same draws unguarded (docs/switching.md, \"The guard\")."),
+    guard_margin: float | None = typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in "
+                                              "[0, 1) (default: the one chosen with the survival estimate)."),
 ) -> None:
     """Evaluate a library policy under paper Table 1 randomization: falls, leg touches, heading held, tracking
-    errors; or, with --impulses, its fall rate against a single push's impulse."""
+    errors; or, with --impulses, its fall rate against a single push's impulse (with --guard, guarded and not)."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
     from gaitlib.envs import EnvConfig
     from gaitlib.library import Library
@@ -295,6 +294,12 @@ def eval_command(
     check_worlds("--episodes", episodes, backend=backend)
     values = None if impulses is None else parse_values(impulses, option="--impulses", bounds=IMPULSE_NS,
                                                         example="0:30:3")
+    if guard or guard_margin is not None:
+        from gaitlib.cli.survival import guarded_curve
+
+        guarded_curve(gait, library, values, guard_margin, record=record, episodes=episodes, backend=backend,
+                       seed=seed, plot=plot, as_json=as_json, falls=falls)
+        return
     if record:  # into the library a writing command writes (gaitlib.library.target), the shipped one on purpose only
         from gaitlib.cli.options import OptionError
         from gaitlib.library.target import check_writable, copy_library, writing_target
@@ -342,8 +347,9 @@ def eval_command(
         + ("delay 0-1 steps" if action_delay is None else f"delay {action_delay} step(s)")
         + (f", {late} step(s) late" if late else ""),
         [
-            (f"falls ({result.falls} definition)", _rate(result.fall_rate, result.fall_ci95)),
-            ("leg touches (episodes with a non-foot body on the ground)", _rate(result.touch_rate, result.touch_ci95)),
+            (f"falls ({result.falls} definition)", rate_text(result.fall_rate, result.fall_ci95)),
+            ("leg touches (episodes with a non-foot body on the ground)",
+             rate_text(result.touch_rate, result.touch_ci95)),
             ("longest touch (s)", f"{result.longest_touch_s:.3f}"),
             ("falls by cause (one may meet several)",
              ", ".join(f"{name.replace('_', ' ')} {n}" for name, n in result.falls_by_cause.items()) or "-"),

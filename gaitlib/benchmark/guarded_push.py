@@ -1,0 +1,107 @@
+"""The single-shove curve of :mod:`gaitlib.benchmark.push_curve` run on the meta-controller, with the guard on or
+off on the same draws (``gaitlib eval GAIT --impulses ... --guard``).
+
+Every world of the library's environment starts in the gait measured and is shoved once exactly as in
+:func:`~gaitlib.benchmark.push_curve.single_push_curve` (same settle time, window, duration, sectors, fall
+definition); no switch is requested. Guarded, the guard may catch a world into another gait and return it to the
+measured one (:mod:`gaitlib.meta.guard`). Each point reports, beside the falls, every catch: from which gait to
+which, what the estimate and the net read, the detection delay (control steps from the shove's start to the catch;
+a catch before the shove is a false catch) and how long until the measured gait ran again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from gaitlib.defaults import DEFAULT_FALLS, Falls
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.terminations import FallTally, TerminationConfig
+from gaitlib.benchmark.push_curve import AFTER_S, SECTORS, SETTLE_S, PushPoint
+from gaitlib.meta.guard import Guard
+from gaitlib.meta.setup import SwitchingSetup
+from gaitlib.rotations import yaw_of
+from gaitlib.sim import make_backend
+from gaitlib.stats import wilson_interval
+
+__all__ = ["guarded_push_curve"]
+
+
+def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None, impulses: Sequence[float],
+                       episodes: int, duration_s: float = 0.1, backend: str = "auto", seed: int = 0,
+                       falls: Falls = DEFAULT_FALLS) -> list[PushPoint]:
+    """The fall rate of ``gait`` on ``setup``'s meta-controller under one shove of each impulse (N s), ``episodes``
+    worlds per impulse, guarded by ``guard`` (``None``: unguarded, the same draws)."""
+    g = setup.gait_index(gait)
+    cycle_s = 1.0 / setup.entries[g].clip.phase_rate
+    cfg = EnvConfig(episode_seconds=SETTLE_S + cycle_s + duration_s + AFTER_S, pushes=PushConfig(max_force=0.0),
+                    termination=TerminationConfig().counting(falls, heading=False))
+    return [_point(setup, g, guard, cfg, impulse, episodes, duration_s, cycle_s, backend, seed + k)
+            for k, impulse in enumerate(impulses)]
+
+
+def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, episodes: int, duration_s: float,
+           cycle_s: float, backend: str, seed: int) -> PushPoint:
+    sim = make_backend(backend, num_worlds=episodes)
+    try:
+        env = setup.make_env(sim, cfg, seed=seed)
+        dev, n, dt = env.device, env.num_envs, env.dt
+        env.reset_worlds(torch.arange(n, device=dev), gait=torch.full((n,), g, dtype=torch.long, device=dev))
+        ctl = setup.controller(env, "net-lookahead", guard=guard, seed=seed)
+        gen = torch.Generator().manual_seed(seed)
+        start = torch.round((SETTLE_S + cycle_s * torch.rand(n, generator=gen)) / dt).long().to(dev)
+        length = max(1, round(duration_s / dt))
+        angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)
+        force = impulse / (length * dt)
+        alive = torch.ones(n, dtype=torch.bool, device=dev)
+        tally = FallTally(n, dev)
+        catches, measured_steps, steps = [], 0, 0
+        with torch.inference_mode():
+            for step in range(env.max_episode_length):
+                begins, ends = (start == step) & alive, (start + length == step) & alive
+                if begins.any():
+                    ids = begins.nonzero().squeeze(1)
+                    heading = yaw_of(env.sim_state.root_quat[ids]) + angle[ids]
+                    push = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
+                    env.backend.set_trunk_force(ids, force * push)
+                if ends.any():
+                    ids = ends.nonzero().squeeze(1)
+                    env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
+                result = ctl.step()
+                catches += [c for c in result.catches if bool(alive[c.world])]
+                measured_steps += int(((env.gait == g) & alive).sum())
+                steps += int(alive.sum())
+                time_outs = torch.zeros_like(result.fell)
+                tally.step(result.fell, {"time_outs": time_outs, "touch": result.touch}, alive)
+                alive &= ~result.fell & (env.episode_length_buf > 0)  # a time-out resets the world too
+    finally:
+        sim.close()
+    sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
+    fell, touched, longest = tally.fell.cpu(), tally.touched, tally.longest
+    by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
+    falls, touches = int(fell.sum()), int(touched.sum())
+    point = PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector, touches,
+                      wilson_interval(touches, n), float(longest.max()) * dt, cfg.termination.falls)
+    return dataclasses.replace(point, guard=_guard_summary(guard, catches, start.cpu(), setup.gaits, dt,
+                                                           measured_steps / max(1, steps)))
+
+
+def _guard_summary(guard: Guard | None, catches: list, start: torch.Tensor, gaits: tuple[str, ...], dt: float,
+                   measured_share: float) -> dict:
+    """Whether the guard was on, and its catches (each, and the detection delays in control steps)."""
+    listed = [{"world": c.world, "time_s": c.step * dt, "from": gaits[c.source], "to": gaits[c.dest],
+               "stay": c.stay, "offer": c.offer, "delay_steps": c.step - int(start[c.world]),
+               "back_after_s": None if c.back_step is None else (c.back_step - c.step) * dt} for c in catches]
+    delays = np.array([c["delay_steps"] for c in listed if c["delay_steps"] >= 0])
+    return {
+        "on": guard is not None, "margin": None if guard is None else guard.margin,
+        "horizon_s": None if guard is None else guard.horizon_s, "catches": listed,
+        "false_catches": sum(c["delay_steps"] < 0 for c in listed),
+        "delay_steps_median": float(np.median(delays)) if len(delays) else None,
+        "measured_gait_share": measured_share,
+    }
