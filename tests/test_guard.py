@@ -103,3 +103,23 @@ def test_guarded_run_reports_and_plots(switching_library, tmp_path):
     first = guard["catches"][0]
     assert (first["from"], first["to"], first["time_s"]) == ("trot", "stand", 0.0)
     assert (tmp_path / "run.png").stat().st_size > 0
+
+
+def test_eval_impulses_guarded_beside_unguarded(switching_library, tmp_path):
+    args = ["eval", "trot", "--impulses", "6", "--episodes", "2", "--backend", "mujoco", "--guard", "--json"]
+    refused = _cli(*args, "--library", str(switching_library))
+    assert refused.returncode == 2 and "no survival estimate" in refused.stderr
+    assert refused.stderr.count("\n") == 1
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"forced")
+    save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
+    run = _cli(*args, "--library", str(library.root), "--guard-margin", "0")
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout)
+    off, on = out["unguarded_points"][0], out["points"][0]
+    assert off["guard"]["on"] is False and off["guard"]["catches"] == []
+    assert on["guard"]["on"] is True and on["guard"]["margin"] == 0.0
+    assert {c["world"] for c in on["guard"]["catches"] if c["time_s"] == 0} == {0, 1}
+    assert on["guard"]["false_catches"] >= 2  # caught before the shove: no estimate that low is right
+    assert on["guard"]["measured_gait_share"] < 1.0
