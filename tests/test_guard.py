@@ -123,3 +123,23 @@ def test_eval_impulses_guarded_beside_unguarded(switching_library, tmp_path):
     assert {c["world"] for c in on["guard"]["catches"] if c["time_s"] == 0} == {0, 1}
     assert on["guard"]["false_catches"] >= 2  # caught before the shove: no estimate that low is right
     assert on["guard"]["measured_gait_share"] < 1.0
+
+
+def test_benchmark_guard_refused_without_estimate_and_counted_with_one(switching_library, tmp_path):
+    args = ["benchmark", "--strategies", "net-lookahead", "--magnitudes", "0", "--samples", "2", "--pairs",
+            "trot-stand", "--worlds", "2", "--backend", "mujoco", "--guard", "--json"]
+    refused = _cli(*args, "--library", str(switching_library), "--out", str(tmp_path / "refused"))
+    assert refused.returncode == 2 and "no survival estimate" in refused.stderr
+    assert not (tmp_path / "refused").exists()
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"forced")
+    save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
+    run = _cli(*args, "--library", str(library.root), "--out", str(tmp_path / "bench"), "--guard-margin", "0")
+    assert run.returncode == 0, run.stderr
+    guard = json.loads(run.stdout)["guard"]
+    assert guard["on"] is True and guard["margin"] == 0.0
+    (group,) = guard["catches"].values()
+    assert group["catches"] >= 2 and group["by_pair"].get("trot-stand", 0) >= 2
+    again = _cli(*args, "--library", str(library.root), "--out", str(tmp_path / "bench"), "--guard-margin", "0")
+    assert again.returncode == 0 and json.loads(again.stdout)["guard"] == guard  # resumed: read back, checked

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gaitlib.atomic import release_lock, stale_temporaries, take_lock, write_json
+from gaitlib.atomic import file_sha256, release_lock, stale_temporaries, take_lock, write_json
 from gaitlib.benchmark.gap import DeploymentGap
 from gaitlib.benchmark.results import group_key, open_results
 from gaitlib.cluster import ClusterConfig, WorkerSpec, run_ordered
@@ -38,7 +38,9 @@ from gaitlib.defaults import COMPARED, DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.library.store import Library
 from gaitlib.meta import SwitchEvent, SwitchingSetup, SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
+from gaitlib.meta.guard import catch_summary
 from gaitlib.robots import RobotSpec
 from gaitlib.sim import make_backend
 
@@ -94,6 +96,11 @@ class SweepConfig:
     turned away or on the ground, a leg's touch ridden through (the field's: legged_gym's and Isaac Lab's A1);
     ``contact``, any non-foot body on the ground too (gaitlib's strict definition). Touches are counted beside
     either way."""
+    guard: bool = False
+    """Run every transition with the guard on (:mod:`gaitlib.meta.guard`; off by default, so that the strategies'
+    figures stay comparable with the paper's)."""
+    guard_margin: float | None = None
+    """The guard's margin (``None``: the one chosen with the library's survival estimate)."""
     routes: dict[str, tuple[str, ...]] = field(default_factory=dict)
     """``"m-n"`` -> the gaits (m, ..., n) a transition of that pair switches through, each switch with the group's
     strategy, one after the other on the same robot (:mod:`gaitlib.strategies.routes`); the other pairs switch
@@ -136,7 +143,7 @@ class SweepConfig:
     def settings(self) -> dict:
         """The settings a resumed sweep must repeat (the gap's entries only where it differs from none)."""
         fixed = asdict(self)
-        defaults = () if self.routes else ("routes",)
+        defaults = (() if self.routes else ("routes",)) + (() if self.guard else ("guard", "guard_margin"))
         for name in ("backend", "device", "gap", "protocol", *defaults):  # defaults: sweeps from before they existed
             fixed.pop(name)
         protocol = asdict(self.protocol)
@@ -188,6 +195,9 @@ def run_sweep(
     # Everything that decides the numbers: a resume with any of it changed is refused (open_results names it).
     settings = cfg.settings() | {"pairs": [list(p) for p in pairs],
                                  "switching": setup.resources.library.switching_identity()}
+    if cfg.guard:  # the estimate decides the numbers too; a library without one is refused in one line
+        setup.guard(margin=cfg.guard_margin)
+        settings["survival"] = file_sha256(setup.resources.library.switching_dir / Library.SURVIVAL)
     identities = setup.resources.library.identities(setup.gaits)
     open_results(out, settings, identities)  # refuse other settings before anything is created
     lock = out / "results.json.lock"
@@ -215,7 +225,7 @@ def _sweep(out: Path, setup: SwitchingSetup, cfg: SweepConfig, pairs: list, resu
         cluster = cluster.for_backend(cfg.backend_name(), cfg.device)
     ordered = run_ordered(todo, spec=WorkerSpec(GroupWorker, worker), cluster=cluster)
     try:
-        for task, (cells, elapsed) in ordered:
+        for task, (cells, elapsed, guard) in ordered:
             key = group_key(task.strategy, task.magnitude)
             done += per_group
             results["groups"][key] = {
@@ -224,7 +234,7 @@ def _sweep(out: Path, setup: SwitchingSetup, cfg: SweepConfig, pairs: list, resu
                 "backend": cfg.backend_name(),
                 "elapsed_s": round(elapsed, 2),
                 "cells": {f"{m}-{n}": asdict(c) for (m, n), c in cells.items()},
-            }
+            } | ({"guard": guard} if cfg.guard else {})
             write_json(out / "results.json", results, indent=1, checksum=True)
             if progress is not None and cluster is not None:
                 progress(key, done, total)
@@ -258,15 +268,15 @@ class GroupWorker:
         self._pairs, self._cfg, self._progress = [tuple(p) for p in pairs], config, progress
         self._robot = config.gap.robot_spec()
 
-    def __call__(self, task: GroupTask) -> tuple[dict[tuple[str, str], CellCounts], float]:
+    def __call__(self, task: GroupTask) -> tuple[dict[tuple[str, str], CellCounts], float, dict]:
         start, key = time.perf_counter(), group_key(task.strategy, task.magnitude)
 
         def report(finished: int) -> None:
             if self._progress is not None:
                 self._progress(key, finished)
 
-        cells = _run_group(self._setup, self._robot, task, self._pairs, self._cfg, report)
-        return cells, time.perf_counter() - start
+        cells, guard = _run_group(self._setup, self._robot, task, self._pairs, self._cfg, report)
+        return cells, time.perf_counter() - start, guard
 
 
 def _pairs(cfg: SweepConfig, setup: SwitchingSetup) -> list[tuple[str, str]]:
@@ -286,8 +296,9 @@ def _run_group(
     pairs: Sequence[tuple[str, str]],
     cfg: SweepConfig,
     report: Callable[[int], None],
-) -> dict[tuple[str, str], CellCounts]:
-    """All transitions of one strategy at one push magnitude, on ``robot``."""
+) -> tuple[dict[tuple[str, str], CellCounts], dict]:
+    """All transitions of one strategy at one push magnitude, on ``robot``, and the guard's catches among them
+    (:func:`~gaitlib.meta.guard.catch_summary`)."""
     # Every strategy meets the same random draws at a magnitude (common random numbers: differences between
     # strategies are not blurred by different worlds), and each magnitude its own.
     magnitude = task.magnitude
@@ -298,13 +309,16 @@ def _run_group(
         termination = TerminationConfig().counting(cfg.falls)
         env_cfg = EnvConfig(episode_seconds=_EPISODE_SECONDS, pushes=pushes, termination=termination)
         env = cfg.gap.make_env(setup, sim, env_cfg, seed=seed)
-        controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed)
+        guard = setup.guard(margin=cfg.guard_margin) if cfg.guard else None
+        controller = setup.controller(env, task.strategy, deadline_s=cfg.protocol.deadline_s, seed=seed, guard=guard)
         routes = [cfg.routes.get(f"{m}-{n}", (m, n)) for m, n in pairs]
         legs = [[(setup.gait_index(a), setup.gait_index(b)) for a, b in itertools.pairwise(r)] for r in routes]
         cells = CellSchedule(legs, pairs, cfg.samples, report)
         protocol = dataclasses.replace(cfg.protocol, chain=bool(cfg.routes))  # a route's legs on one robot
-        SwitchTrials(controller, protocol, cells, seed=seed).run()
-        return cells.cells
+        trials, catches = SwitchTrials(controller, protocol, cells, seed=seed), []
+        while trials.running:
+            catches += trials.step().catches
+        return cells.cells, catch_summary(catches, setup.gaits, env.dt)
     finally:
         sim.close()
 
@@ -384,3 +398,4 @@ class CellSchedule(TrialSchedule):
         cell.touched += int(longest_touch_s >= 0)
         cell.longest_touch_s = max(cell.longest_touch_s, longest_touch_s)
         self.ended += 1
+

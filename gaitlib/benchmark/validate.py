@@ -80,7 +80,8 @@ def check_results(results: Mapping, *, path: Path, strategies: Sequence[str],
                    "switched": _COUNT, "source_falls": _COUNT, "touched": _COUNT,
                    "longest_touch_s": number(0, unit="s")})
     group = record({"strategy": text(tuple(strategies)), "magnitude_n": _PUSH_N, "backend": text(BACKENDS),
-                    "elapsed_s": number(0, unit="s"), "cells": table(_PAIR, cell, low=1)})
+                    "elapsed_s": number(0, unit="s"), "cells": table(_PAIR, cell, low=1)},
+                   {"guard": record({"catches": _COUNT, "by_pair": table(_PAIR, _COUNT)}, extra=plain())})
     schema = record({"format": text(), "format_version": number(whole=True), "settings": _settings(strategies),
                      "library_identities": table(GAIT_NAME, SHA256, low=1), "groups": table(text(), group)})
     check_content(results, schema, error=GaitlibError, prefix=f"{path} is damaged: ")

@@ -145,7 +145,7 @@ def run_command(
         "longest_touch_s": trace.longest_touch_s,
         "plot": str(plot),
         "video": None if video is None else str(video),
-        "guard": _guard_report(trace, setup.gaits, unguarded),
+        "guard": trace.guard_report(why_off=unguarded),
     }
     if as_json:
         print(json_text(report))
@@ -174,18 +174,6 @@ def run_command(
         print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
               f"{len(trace.catches)} catch(es)")
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
-
-
-def _guard_report(trace, gaits: tuple[str, ...], unguarded: str | None) -> dict:
-    """Whether the guard was on (and why not), its margin, and each catch: when, from which gait to which, what
-    the estimate and the net read, and how long until the requested gait ran again."""
-    catches = [
-        {"time_s": c.step * trace.dt, "from": gaits[c.source], "to": gaits[c.dest], "phase": c.phase,
-         "stay": c.stay, "offer": c.offer, "requested": gaits[c.requested],
-         "back_after_s": None if c.back_step is None else (c.back_step - c.step) * trace.dt}
-        for c in trace.catches
-    ]
-    return {"on": trace.guarded, "margin": trace.guard_margin, "why_off": unguarded, "catches": catches}
 
 
 def benchmark_command(
@@ -221,6 +209,10 @@ def benchmark_command(
     routed: bool = typer.Option(False, "--routed", help="Each transition follows the library's route table "
                                 "(gaitlib routes): through another gait where that measured better, counted once."),
     falls: str = falls_option(),
+    guard: bool = typer.Option(False, "--guard", help="Every transition with the guard on (docs/switching.md, \"The "
+                               "guard\"); off by default, so that the strategies' figures stay the paper's."),
+    guard_margin: float | None = typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in "
+                                              "[0, 1) (default: the one chosen with the survival estimate)."),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),
     workers: int | None = workers_option(),
@@ -254,6 +246,8 @@ def benchmark_command(
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
+    if guard or guard_margin is not None:
+        guarding = setup.guard(margin=guard_margin)  # no survival estimate, a stale one, a bad margin: one line
     detours = {}
     if routed:
         detours = _route_table(setup, strategies=names, pushes=swept, falls=falls).detours()
@@ -267,9 +261,12 @@ def benchmark_command(
         backend=backend,
         seed=seed,
         falls=falls,
+        guard=guard or guard_margin is not None,
+        guard_margin=guard_margin,
         routes=detours,
     )
     results = _sweep_with_progress(out, setup, config, cluster=cluster)
+    catches = {key: group["guard"] for key, group in results["groups"].items() if "guard" in group}
     rows = cell_results(results)
     if not rows:
         raise GaitlibError("the benchmark produced no results")
@@ -281,9 +278,15 @@ def benchmark_command(
     if as_json:
         touches = success_table(rows, field="touch_rate")
         print(json_text({"falls": falls, "success": success_table(rows), "touches": touches, "summary": facts,
-                         "out": str(out)}))
+                         "out": str(out), "guard": {"on": config.guard, "margin": guarding.margin if config.guard else None,
+                                                    "catches": catches}}))
         return
     _print_summary(facts, out, plot, falls)
+    if config.guard:
+        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
+              + "; ".join(f"{key}: {g['catches']} catch(es) {g['by_pair']}" for key, g in catches.items()))
+    else:
+        print("guard off (--guard turns it on)")
 
 
 def routes_command(

@@ -96,6 +96,18 @@ class RunTrace:
             longest = max(longest, run)
         return longest * self.dt
 
+    def guard_report(self, *, why_off: str | None = None) -> dict:
+        """Whether the guard was on (``why_off``: why not), its margin, and each catch: when, from which gait to
+        which, what the estimate and the net read, and how long until the requested gait ran again."""
+        g = self.gaits
+        catches = [
+            {"time_s": c.step * self.dt, "from": g[c.source], "to": g[c.dest], "phase": c.phase, "stay": c.stay,
+             "offer": c.offer, "requested": g[c.requested],
+             "back_after_s": None if c.back_step is None else (c.back_step - c.step) * self.dt}
+            for c in self.catches
+        ]
+        return {"on": self.guarded, "margin": self.guard_margin, "why_off": why_off, "catches": catches}
+
     @property
     def switches_s(self) -> list[float]:
         """When each switch happened, s."""

@@ -19,7 +19,7 @@ from gaitlib.strategies.lookahead import LookaheadStrategy
 from gaitlib.strategies.survival import SurvivalEstimate, check_guard, survival_features
 from gaitlib.transitions.explicit import explicit_state
 
-__all__ = ["CatchEvent", "Guard", "GuardReading"]
+__all__ = ["CatchEvent", "Guard", "GuardReading", "catch_summary"]
 
 
 @dataclass
@@ -97,3 +97,14 @@ class Guard:
         """(k,) bool: the best offer beats staying by more than the margin."""
         best, _ = reading.best()
         return best - reading.stay > self.margin
+
+
+def catch_summary(catches: list[CatchEvent], gaits: tuple[str, ...], dt: float) -> dict:
+    """Many worlds' catches in short: how many, per "from-to", and the time until the requested gait ran again
+    (median over the catches it did, s)."""
+    pairs: dict[str, int] = {}
+    for c in catches:
+        pair = f"{gaits[c.source]}-{gaits[c.dest]}"
+        pairs[pair] = pairs.get(pair, 0) + 1
+    back = sorted((c.back_step - c.step) * dt for c in catches if c.back_step is not None)
+    return {"catches": len(catches), "by_pair": pairs, "back_after_s_median": back[len(back) // 2] if back else None}
