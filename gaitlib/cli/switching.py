@@ -277,9 +277,9 @@ def benchmark_command(
     facts = summary(rows)
     if as_json:
         touches = success_table(rows, field="touch_rate")
+        guarded = {"on": config.guard, "margin": guarding.margin if config.guard else None, "catches": catches}
         print(json_text({"falls": falls, "success": success_table(rows), "touches": touches, "summary": facts,
-                         "out": str(out), "guard": {"on": config.guard, "margin": guarding.margin if config.guard else None,
-                                                    "catches": catches}}))
+                         "out": str(out), "guard": guarded}))
         return
     _print_summary(facts, out, plot, falls)
     if config.guard:
