@@ -60,6 +60,7 @@ def test_a_timeline_requests_the_nearest_skill_and_switches_through_the_controll
     assert report["path_length_m"] == pytest.approx(0.8 * 0.5 + 0.1 * 1.0, rel=1e-3)
     assert {"stayed_up", "fell_s", "touches", "longest_touch_s", "velocity_error_rms", "end_error_m",
             "falls"} <= set(report)
+    assert report["guard"]["on"] is False and "no survival estimate" in report["guard"]["why_off"]
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -161,3 +162,27 @@ def test_a_drive_s_video_is_rendered_as_a_run_s_or_refused_in_one_line(tmp_path)
         assert json.loads(result.stdout)["video"] == str(video)
     else:  # imageio without headless OpenGL
         assert result.returncode == 2 and "no headless OpenGL" in result.stderr
+
+
+def test_a_drive_is_guarded_as_a_run_is(switching_library, tmp_path) -> None:
+    from test_guard import _forced
+
+    from gaitlib.library import Library
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies.survival import save_survival
+    from tests.conftest import copy_library
+
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"forced")
+    save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
+    commands = _write(tmp_path / "c.csv", HEADER + "0,1.45,0,0\n0.5,1.45,0,0\n")
+    result = gaitlib("drive", "--commands", str(commands), "--library", str(library.root), "--plot",
+                     str(tmp_path / "d.png"), "--backend", "mujoco", "--guard-margin", "0", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert [row["skill"] for row in report["commands"]] == ["trot"]
+    guard = report["guard"]
+    assert guard["on"] is True and guard["margin"] == 0.0
+    first = guard["catches"][0]  # the estimate gives the trot up at once: caught into the stand, to return
+    assert (first["from"], first["to"], first["requested"], first["time_s"]) == ("trot", "stand", "trot", 0.0)

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
+from gaitlib.cli.guarding import choose_guard, guard_margin_option, guard_option, print_guard
 from gaitlib.cli.options import DELAY_STEPS, SEED, bounded, falls_option
 from gaitlib.defaults import DEFAULT_STRATEGY
 
@@ -37,14 +38,17 @@ def drive_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
     falls: str = falls_option(),
+    guard: bool = guard_option(),
+    guard_margin: float | None = guard_margin_option(),
 ) -> None:
     """Drive one robot by --commands (or through --waypoints): at each command the skill nearest the commanded
-    velocity is requested and the meta-controller switches to it with --strategy."""
+    velocity is requested and the meta-controller switches to it with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError, check_out_file
     from gaitlib.meta import load_switching
     from gaitlib.meta.commands import read_commands, read_waypoints, skills_of, waypoint_commands
     from gaitlib.meta.drive import drive
     from gaitlib.meta.drive_plot import plot_drive
+    from gaitlib.strategies.survival import check_guard
 
     if (commands is None) == (waypoints is None):
         raise OptionError("gaitlib drive takes one of --commands FILE.csv or --waypoints FILE.csv")
@@ -53,17 +57,20 @@ def drive_command(
         check_out_file("--video", video)
     points = read_waypoints(waypoints) if waypoints is not None else None
     timeline = read_commands(commands) if commands is not None else None
+    check_guard(margin=guard_margin)
     setup = load_switching(library)
     if points is not None:
         timeline = waypoint_commands(points, skills_of([e.description for e in setup.entries]))
+    guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)
     result = drive(setup, timeline, strategy=strategy, action_delay=action_delay, backend=backend, seed=seed,
-                   falls=falls)
+                   falls=falls, guard=guarding)
     plot_drive(result, plot)
     if video is not None:
         from gaitlib.meta.video import render_trace
 
         render_trace(result.trace, video)
     report = _report(result, setup.gaits, source=str(commands or waypoints), plot=plot, video=video)
+    report["guard"] = result.trace.guard_report(why_off=unguarded)
     if as_json:
         print(json_text(report))
         return
@@ -89,6 +96,7 @@ def drive_command(
     if error["distance"] is not None:
         print(f"velocity error (rms): forward {error['forward']:.3f} m/s, lateral {error['lateral']:.3f} m/s, yaw rate "
               f"{error['yaw_rate']:.3f} rad/s; {error['distance']:.3f} m/s by the drive's distance")
+    print_guard(report["guard"], guarding, trace)
     print(f"ended {report['end_error_m']:.2f} m from the commanded end of a {report['path_length_m']:.2f} m path")
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
+from gaitlib.cli.guarding import choose_guard, guard_margin_option, guard_option, print_guard
 from gaitlib.cli.options import (
     COUNT,
     DELAY_STEPS,
@@ -64,16 +65,12 @@ def run_command(
     routed: bool = typer.Option(False, "--routed", help="Make each switch through another gait where the library's "
                                 "route table (gaitlib routes) measured that better."),
     falls: str = falls_option(),
-    guard: bool = typer.Option(True, "--guard/--no-guard", help="Let the guard catch the robot where another gait "
-                               "offers clearly more than staying (docs/switching.md, \"The guard\"); a library "
-                               "without a survival estimate runs unguarded and says so."),
-    guard_margin: float | None = typer.Option(None, "--guard-margin", help="The guard's margin, in [0, 1) "
-                                              "(default: the one chosen with the library's survival estimate)."),
+    guard: bool = guard_option(),
+    guard_margin: float | None = guard_margin_option(),
 ) -> None:
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
     with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError, check_out_file
-    from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
@@ -87,14 +84,7 @@ def run_command(
         check_out_file("--video", video)
     check_guard(margin=guard_margin)
     setup = load_switching(library)
-    guarding, unguarded = None, None if guard else "unguarded (--no-guard)"
-    if guard:
-        try:
-            guarding = setup.guard(margin=guard_margin)
-        except GaitlibError as why:  # a library fitted before the guard existed, or a stale estimate
-            unguarded = f"unguarded: {why}"
-    if unguarded and not as_json:
-        print(unguarded)
+    guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)
     asked = sequence
     if routed:
         table = _route_table(setup, strategies=(strategy,), pushes=(push,), falls=falls)
@@ -166,13 +156,7 @@ def run_command(
                if trace.touches else "no leg touched the ground")
     print(f"{' -> '.join((source, *sequence))} with {strategy}: {len(switches)} of {len(sequence)} switch(es) made; "
           f"the robot {outcome} (falls counted the {trace.falls} way); {touches}")
-    for catch in report["guard"]["catches"]:
-        back = "not yet" if catch["back_after_s"] is None else f"after {catch['back_after_s']:.2f} s"
-        print(f"guard caught {catch['from']} -> {catch['to']} at {catch['time_s']:.2f} s (staying {catch['stay']:.3f}, "
-              f"switching {catch['offer']:.3f}); {catch['requested']} ran again {back}")
-    if guarding is not None:
-        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
-              f"{len(trace.catches)} catch(es)")
+    print_guard(report["guard"], guarding, trace)
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
 
 

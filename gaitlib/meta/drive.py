@@ -17,6 +17,7 @@ import numpy as np
 from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY, Falls
 from gaitlib.meta.commands import Commands, distance, nearest_skills, skills_of
 from gaitlib.meta.episode import RunTrace, drive_episode
+from gaitlib.meta.guard import Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.rotations import yaw_of
 
@@ -81,14 +82,15 @@ def drive(
     backend: str = "auto",
     seed: int = 0,
     falls: Falls = DEFAULT_FALLS,
+    guard: Guard | None = None,
 ) -> DriveResult:
     """Drive one robot by ``commands`` with ``setup``'s library: each command requests its nearest skill
     (:func:`~gaitlib.meta.commands.nearest_skills`, which refuses a command beyond the library's range before any
-    work), switched by ``strategy``; then measure the run."""
+    work), switched by ``strategy`` (guarded by ``guard`` when given); then measure the run."""
     names, gaps = nearest_skills(commands, skills_of([e.description for e in setup.entries]))
     timeline = list(zip(commands.time_s[:-1].tolist(), names, strict=True))
     trace = drive_episode(setup, timeline=timeline, end_s=commands.end_s, strategy=strategy,
-                          action_delay=action_delay, backend=backend, seed=seed, falls=falls)
+                          action_delay=action_delay, backend=backend, seed=seed, falls=falls, guard=guard)
     qpos = np.vstack([trace.start_qpos[None], trace.qpos.reshape(-1, len(trace.start_qpos))])
     heading = np.unwrap(yaw_of(qpos[:, 3:7].astype(np.float64)))
     pose = np.column_stack([np.arange(len(qpos)) * trace.dt, qpos[:, 0], qpos[:, 1], heading])

@@ -18,7 +18,7 @@ _SMOOTH_S = 0.5
 
 def plot_drive(result: DriveResult, path: Path) -> Path:
     """Write ``result`` as a PNG (atomically): on the left the plane, the commanded path dashed, the robot's path
-    solid, its switches (red dots), its start (green) and a fall (purple cross); on the right the forward speed,
+    solid, its switches (red dots), the guard's catches (orange), its start (green) and a fall (purple cross); on the right the forward speed,
     lateral speed and yaw rate commanded (steps) and achieved (a moving mean), requests and switches marked."""
     import matplotlib
 
@@ -36,6 +36,9 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
     steps = [event.step for event in trace.switches]
     if steps:
         plane.plot(pose[steps, 1], pose[steps, 2], "o", color="tab:red", markersize=5, label="switch")
+    caught = [catch.step for catch in trace.catches]
+    if caught:
+        plane.plot(pose[caught, 1], pose[caught, 2], "^", color="tab:orange", markersize=6, label="guard's catch")
     if trace.fell_s is not None:
         plane.plot(*pose[-1, 1:3], "x", color="tab:purple", markersize=10, mew=2, label="fall")
     plane.set_aspect("equal", adjustable="datalim")
@@ -55,6 +58,8 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
             ax.axvline(request_s, color="tab:green", linestyle=":", linewidth=1.2)
         for switch_s in trace.switches_s:
             ax.axvline(switch_s, color="tab:red", linewidth=1.2)
+        for catch in trace.catches:
+            ax.axvline(catch.step * trace.dt, color="tab:orange", linewidth=1.2)
         ax.set_ylabel(labels[k])
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time (s)")

@@ -207,12 +207,14 @@ def drive_episode(
     backend: str = "auto",
     seed: int = 0,
     falls: Falls = DEFAULT_FALLS,
+    guard: Guard | None = None,
 ) -> RunTrace:
     """One robot driven by a timeline of (time s, gait) from 0 s: it starts in the first gait (reference state
     initialization at a random phase, fresh Table 1 randomization); at each later time its gait is requested from
     the meta-controller, which ``strategy`` switches as in :func:`run_episode` (a gait already requested, or
-    active, is not requested again; the active one cancels a request still waiting). The run ends at ``end_s``, or
-    at a fall. No pushes. ``action_delay``, ``seed`` and ``falls``: as :func:`run_episode`'s."""
+    active, is not requested again; the active one cancels a request still waiting, and a caught robot's return).
+    The run ends at ``end_s``, or at a fall. No pushes. ``action_delay``, ``seed``, ``falls`` and ``guard``: as
+    :func:`run_episode`'s."""
     times = [t for t, _ in timeline]
     if not timeline or times[0] != 0 or any(b <= a for a, b in pairwise(times)) or not end_s > times[-1]:
         raise GaitlibError("a drive's timeline starts at 0 s, its times increase, and it ends after the last one")
@@ -221,11 +223,12 @@ def drive_episode(
     try:
         cfg = EnvConfig(episode_seconds=end_s + 1.0, termination=TerminationConfig().counting(falls))
         env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
-        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed)
+        ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed, guard=guard)
         env.reset_worlds(torch.zeros(1, dtype=torch.long, device=env.device),
                          gait=torch.full((1,), gaits[0], dtype=torch.long, device=env.device))
         trace = RunTrace(gaits=setup.gaits, source=setup.gaits[gaits[0]], dests=(), strategy=strategy,
-                         thresholds=(), dt=env.dt, push_n=0.0, falls=falls)
+                         thresholds=(), dt=env.dt, push_n=0.0, falls=falls, guarded=guard is not None,
+                         guard_margin=None if guard is None else guard.margin)
         trace.start_qpos = _qpos(env)
         rows: dict[str, list] = {name: [] for name in _ROWS}
         due = [round(t / env.dt) for t in times]
@@ -235,10 +238,10 @@ def drive_episode(
             while k < len(due) and due[k] <= step:
                 if gaits[k] != wanted:
                     wanted = gaits[k]
+                    ctl.request(world, wanted)  # what a caught robot returns to from now
                     if wanted == int(env.gait[0]):
-                        ctl.cancel(world)
+                        ctl.cancel(world)  # already met
                     else:
-                        ctl.request(world, wanted)
                         trace.requests_s.append(step * env.dt)
                         trace.dests += (setup.gaits[wanted],)
                 k += 1

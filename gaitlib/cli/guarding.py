@@ -1,0 +1,49 @@
+"""The guard on the command line, for the commands that run one robot on the meta-controller (``gaitlib run``,
+``gaitlib drive``): its options, whether it is on, and its catches printed."""
+
+from __future__ import annotations
+
+import typer
+
+__all__ = ["choose_guard", "guard_margin_option", "guard_option", "print_guard"]
+
+
+def guard_option():
+    """``--guard/--no-guard``, on by default."""
+    return typer.Option(True, "--guard/--no-guard", help="Let the guard catch the robot where another gait offers "
+                        "clearly more than staying (docs/switching.md, \"The guard\"); a library without a survival "
+                        "estimate runs unguarded and says so.")
+
+
+def guard_margin_option():
+    """``--guard-margin``: the guard's margin instead of the library's."""
+    return typer.Option(None, "--guard-margin", help="The guard's margin, in [0, 1) (default: the one chosen with "
+                        "the library's survival estimate).")
+
+
+def choose_guard(setup, *, on: bool, margin: float | None, quiet: bool):
+    """The library's guard and ``None``, or ``None`` and why the robot runs unguarded (said on stdout unless
+    ``quiet``): ``--no-guard``, or a library without a (fresh) survival estimate."""
+    from gaitlib.errors import GaitlibError
+
+    guarding, unguarded = None, None if on else "unguarded (--no-guard)"
+    if on:
+        try:
+            guarding = setup.guard(margin=margin)
+        except GaitlibError as why:  # a library fitted before the guard existed, or a stale estimate
+            unguarded = f"unguarded: {why}"
+    if unguarded and not quiet:
+        print(unguarded)
+    return guarding, unguarded
+
+
+def print_guard(report: dict, guarding, trace) -> None:
+    """Each catch of a guard report (:meth:`~gaitlib.meta.episode.RunTrace.guard_report`), and the guard's
+    settings and count of catches when it was on."""
+    for catch in report["catches"]:
+        back = "not yet" if catch["back_after_s"] is None else f"after {catch['back_after_s']:.2f} s"
+        print(f"guard caught {catch['from']} -> {catch['to']} at {catch['time_s']:.2f} s (staying {catch['stay']:.3f}, "
+              f"switching {catch['offer']:.3f}); {catch['requested']} ran again {back}")
+    if guarding is not None:
+        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
+              f"{len(trace.catches)} catch(es)")
