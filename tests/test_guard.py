@@ -143,3 +143,21 @@ def test_benchmark_guard_refused_without_estimate_and_counted_with_one(switching
     assert group["catches"] >= 2 and group["by_pair"].get("trot-stand", 0) >= 2
     again = _cli(*args, "--library", str(library.root), "--out", str(tmp_path / "bench"), "--guard-margin", "0")
     assert again.returncode == 0 and json.loads(again.stdout)["guard"] == guard  # resumed: read back, checked
+
+
+def test_eval_push_max_guarded_counts_catches_per_minute(switching_library, tmp_path):
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"forced")
+    save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
+    args = ["eval", "trot", "--push-max", "0", "--seconds", "1", "--episodes", "2", "--backend", "mujoco", "--guard",
+            "--library", str(library.root)]
+    refused = _cli(*args, "--action-delay", "1")
+    assert refused.returncode == 2 and "--action-delay" in refused.stderr and refused.stderr.count("\n") == 1
+    run = _cli(*args, "--guard-margin", "0", "--json")
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout)
+    assert out["unguarded"]["guard"]["catches"] == [] and out["unguarded"]["catches_per_min"] == 0
+    on = out["guarded"]
+    assert len(on["guard"]["catches"]) >= 2 and on["catches_per_min"] > 0  # at 0 N each is a false catch
+    assert on["guard"]["measured_gait_share"] < 1.0

@@ -1,5 +1,7 @@
-"""The single-shove curve of :mod:`gaitlib.benchmark.push_curve` run on the meta-controller, with the guard on or
-off on the same draws (``gaitlib eval GAIT --impulses ... --guard``).
+"""A gait's push figures on the meta-controller, with the guard on or off on the same draws: the single-shove curve
+of :mod:`gaitlib.benchmark.push_curve` (``gaitlib eval GAIT --impulses ... --guard``) and episodes under the paper's
+random pushes (``gaitlib eval GAIT --push-max N --guard``: falls, and the guard's catches per minute; at 0 N every
+catch is a false one, the guard's cost).
 
 Every world of the library's environment starts in the gait measured and is shoved once exactly as in
 :func:`~gaitlib.benchmark.push_curve.single_push_curve` (same settle time, window, duration, sectors, fall
@@ -29,7 +31,7 @@ from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
 from gaitlib.stats import wilson_interval
 
-__all__ = ["guarded_push_curve"]
+__all__ = ["guarded_episodes", "guarded_push_curve"]
 
 
 def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None, impulses: Sequence[float],
@@ -105,3 +107,43 @@ def _guard_summary(guard: Guard | None, catches: list, start: torch.Tensor, gait
         "delay_steps_median": float(np.median(delays)) if len(delays) else None,
         "measured_gait_share": measured_share,
     }
+
+
+def guarded_episodes(setup: SwitchingSetup, gait: str, *, guard: Guard | None, episodes: int, seconds: float,
+                     push_max: float, backend: str = "auto", seed: int = 0, falls: Falls = DEFAULT_FALLS) -> dict:
+    """``episodes`` episodes (one world each) of ``seconds`` of ``gait`` on ``setup``'s meta-controller under the
+    paper's random pushes of up to ``push_max`` N (every 1-3 s, 0.1-0.3 s each; heading drift no fall, as
+    ``gaitlib eval``), guarded by ``guard`` (``None``: unguarded, the same draws): falls, touches, the catches and
+    catches per minute of running, the share of time the gait ran."""
+    g = setup.gait_index(gait)
+    cfg = EnvConfig(episode_seconds=seconds, pushes=PushConfig(max_force=push_max),
+                    termination=TerminationConfig().counting(falls, heading=False))
+    sim = make_backend(backend, num_worlds=episodes)
+    try:
+        env = setup.make_env(sim, cfg, seed=seed)
+        dev, n, dt = env.device, env.num_envs, env.dt
+        env.reset_worlds(torch.arange(n, device=dev), gait=torch.full((n,), g, dtype=torch.long, device=dev))
+        ctl = setup.controller(env, "net-lookahead", guard=guard, seed=seed)
+        alive = torch.ones(n, dtype=torch.bool, device=dev)
+        tally = FallTally(n, dev)
+        catches, measured_steps, steps = [], 0, 0
+        with torch.inference_mode():
+            for _ in range(env.max_episode_length):
+                result = ctl.step()
+                catches += [c for c in result.catches if bool(alive[c.world])]
+                measured_steps += int(((env.gait == g) & alive).sum())
+                steps += int(alive.sum())
+                tally.step(result.fell, {"time_outs": torch.zeros_like(result.fell), "touch": result.touch}, alive)
+                alive &= ~result.fell & (env.episode_length_buf > 0)
+    finally:
+        sim.close()
+    fell, touched = int(tally.fell.sum()), int(tally.touched.sum())
+    minutes = steps * dt / 60
+    summary = _guard_summary(guard, catches, torch.full((n,), -1), setup.gaits, dt, measured_steps / max(1, steps))
+    summary.pop("false_catches"), summary.pop("delay_steps_median")  # no shove to measure them from
+    for c in summary["catches"]:
+        c.pop("delay_steps")
+    return {"gait": gait, "episodes": n, "seconds": seconds, "push_max_n": push_max, "falls": fell,
+            "fall_rate": fell / n, "ci95": wilson_interval(fell, n), "touches": touched,
+            "falls_definition": str(falls), "minutes": minutes,
+            "catches_per_min": len(catches) / minutes if minutes > 0 else None, "guard": summary}

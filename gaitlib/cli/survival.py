@@ -108,9 +108,11 @@ def fit_command(
 
 
 def guarded_curve(gait: str, library: Path | None, impulses, margin: float | None, *, record: bool, episodes: int,
-                   backend: str, seed: int, plot: Path | None, as_json: bool, falls: Falls) -> None:
-    """``gaitlib eval GAIT --impulses ... --guard``: the single-push curve on the meta-controller, unguarded and
-    guarded on the same draws, with the guard's catches."""
+                  seconds: float, push_max: float, other: bool, backend: str, seed: int, plot: Path | None,
+                  as_json: bool, falls: Falls) -> None:
+    """``gaitlib eval GAIT --guard``: with ``impulses``, the single-push curve on the meta-controller, else episodes
+    of ``seconds`` under pushes of up to ``push_max`` N; unguarded and guarded on the same draws, with the guard's
+    catches. ``other``: an option the guarded evaluation does not take was given (refused)."""
     from gaitlib.benchmark.guarded_push import guarded_push_curve
     from gaitlib.benchmark.push_curve import write_push_plot
     from gaitlib.cli.options import OptionError
@@ -118,12 +120,17 @@ def guarded_curve(gait: str, library: Path | None, impulses, margin: float | Non
     from gaitlib.meta import load_switching
     from gaitlib.strategies.survival import check_guard
 
-    if impulses is None or record:
-        raise OptionError("--guard takes --impulses (and not --record): the guarded figures are the single-push curve")
+    if record or other:
+        raise OptionError("--guard runs the policies as trained on the meta-controller: it takes neither --record "
+                          "nor --action-delay nor --late")
     check_guard(margin=margin)
     setup = load_switching(library)
     setup.gait_index(gait)
     guarding = setup.guard(margin=margin)  # no survival estimate, or a stale one: one line, before any work
+    if impulses is None:
+        _guarded_pushes(setup, gait, guarding, episodes=episodes, seconds=seconds, push_max=push_max,
+                        backend=backend, seed=seed, as_json=as_json, falls=falls)
+        return
     curves = {
         label: guarded_push_curve(setup, gait, guard=g, impulses=impulses, episodes=episodes, backend=backend,
                                   seed=seed, falls=falls)
@@ -160,3 +167,29 @@ def guarded_curve(gait: str, library: Path | None, impulses, margin: float | Non
             print(f"{p.impulse_ns:g} N s, world {c['world']}: caught {c['from']} -> {c['to']} at {c['time_s']:.2f} s, "
                   f"{c['delay_steps']} steps after the shove began (staying {c['stay']:.3f}, switching "
                   f"{c['offer']:.3f}); {gait} ran again {back}")
+
+
+def _guarded_pushes(setup, gait: str, guarding, *, episodes: int, seconds: float, push_max: float, backend: str,
+                    seed: int, as_json: bool, falls: Falls) -> None:
+    """``gaitlib eval GAIT --push-max N --guard``: falls and catches, unguarded and guarded on the same draws."""
+    from gaitlib.benchmark.guarded_push import guarded_episodes
+    from gaitlib.cli.tables import rate_text
+
+    runs = {label: guarded_episodes(setup, gait, guard=g, episodes=episodes, seconds=seconds, push_max=push_max,
+                                    backend=backend, seed=seed, falls=falls)
+            for label, g in (("unguarded", None), ("guarded", guarding))}
+    if as_json:
+        print(json_text({"gait": gait, "guard": True, "margin": guarding.margin, "horizon_s": guarding.horizon_s}
+                        | runs))
+        return
+    on, off = runs["guarded"], runs["unguarded"]
+    print(f"eval {gait} on the meta-controller: {episodes} episodes x {seconds:g} s, pushes <= {push_max:g} N, "
+          f"falls ({falls} definition): unguarded {rate_text(off['fall_rate'], off['ci95'])}"
+          f", guarded {rate_text(on['fall_rate'], on['ci95'])} (margin {guarding.margin:g}, horizon "
+          f"{guarding.horizon_s:g} s)")
+    print(f"guard: {len(on['guard']['catches'])} catch(es), {on['catches_per_min']:.3f} per minute of running; "
+          f"{gait} ran {100 * on['guard']['measured_gait_share']:.1f}% of the time")
+    for c in on["guard"]["catches"]:
+        back = "never" if c["back_after_s"] is None else f"after {c['back_after_s']:.2f} s"
+        print(f"world {c['world']}: caught {c['from']} -> {c['to']} at {c['time_s']:.2f} s (staying {c['stay']:.3f}, "
+              f"switching {c['offer']:.3f}); {gait} ran again {back}")

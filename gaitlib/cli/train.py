@@ -279,8 +279,8 @@ def eval_command(
         "in the library --library names, else $GAITLIB_LIBRARY, else your own runs/library."
     ),
     replace: bool = typer.Option(False, "--replace", help="With --record: into the shipped library (refused without)."),
-    guard: bool = typer.Option(False, "--guard", help="With --impulses: run on the meta-controller with the guard on, "
-                               "beside the same draws unguarded (docs/switching.md, \"The guard\")."),
+    guard: bool = typer.Option(False, "--guard", help="Run on the meta-controller with the guard on, beside the same "
+                               "draws unguarded, under --impulses or --push-max (docs/switching.md, \"The guard\")."),
     guard_margin: float | None = typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in "
                                               "[0, 1) (default: the one chosen with the survival estimate)."),
 ) -> None:
@@ -297,8 +297,9 @@ def eval_command(
     if guard or guard_margin is not None:
         from gaitlib.cli.survival import guarded_curve
 
-        guarded_curve(gait, library, values, guard_margin, record=record, episodes=episodes, backend=backend,
-                       seed=seed, plot=plot, as_json=as_json, falls=falls)
+        guarded_curve(gait, library, values, guard_margin, record=record, episodes=episodes, seconds=seconds,
+                      push_max=push_max, other=action_delay is not None or late > 0, backend=backend, seed=seed,
+                      plot=plot, as_json=as_json, falls=falls)
         return
     if record:  # into the library a writing command writes (gaitlib.library.target), the shipped one on purpose only
         from gaitlib.cli.options import OptionError
