@@ -52,8 +52,8 @@ def fit_command(
     data: Path = typer.Argument(..., help="A state file of gaitlib survival record."),
     horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]."),
     margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
-    inputs: str = typer.Option("latent,phase,value", "--inputs",
-                               help="Inputs besides the gait: latent, phase, value, explicit."),
+    inputs: str = typer.Option("latent,phase", "--inputs", help="Inputs besides the gait: latent, phase, value (the "
+                               "critic's, privileged: not exportable to a robot), explicit."),
     epochs: int = bounded(20, "--epochs", help="Training epochs;", bounds=COUNT),
     seed: int = bounded(0, "--seed", help="Split and training seed;", bounds=SEED),
     library: Path | None = typer.Option(
@@ -105,6 +105,23 @@ def fit_command(
     alarms = report["false_alarms_per_min"]
     print(f"false alarms at 0 N: {'-' if alarms is None else f'{alarms:.3f}'} per minute "
           f"(over {report['unshoved_minutes']:.1f} unshoved minutes)")
+
+
+@app.command("export")
+def export_command(
+    out: Path = typer.Option(Path("guard"), "--out", help="Folder to write the guard's deployable files into."),
+    library: Path | None = _LIBRARY,
+) -> None:
+    """Export the guard for a robot-side loop: the policies' latents, the survival estimate and the transition-net
+    as ONNX, with calibrations, horizon, margin and candidates in guard.json (docs/deploying.md)."""
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies.guard_export import export_guard
+
+    setup = load_switching(library)
+    guard = setup.guard()  # no survival estimate, or a stale one: one line, before anything is written
+    path = export_guard(out, policies=[e.policy for e in setup.entries], estimate=guard.estimate,
+                        net=setup.resources.net, calibration=setup.resources.calibration)
+    print(f"{path} (and the ONNX files beside it): horizon {guard.horizon_s:g} s, margin {guard.margin:g}")
 
 
 def guarded_curve(gait: str, library: Path | None, impulses, margin: float | None, *, record: bool, episodes: int,

@@ -1,6 +1,7 @@
 """The survival estimate: the probability that a robot stays up over the next ``horizon_s`` if it keeps the gait it
 runs, from what the transition-net already sees (the running gait, its actor's latent psi_m, its phase) and,
-as candidate inputs, the gait's critic value and the explicit state.
+as candidate inputs, the gait's critic value (which reads the critic's privileged observation: an estimate using it
+cannot run on a robot, :mod:`gaitlib.strategies.guard_export`) and the explicit state.
 
 It is fitted on recorded states (:mod:`gaitlib.collection.survival`: single shoves of 0-30 N s in every direction,
 switches before them), each labelled "no fall within ``horizon_s``" (a state whose episode ends sooner without a
@@ -208,7 +209,7 @@ def _reliability(p: np.ndarray, up: np.ndarray, bins: int = 10) -> list[dict]:
 
 
 def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identities: dict[str, str], dt: float,
-                 inputs: tuple[str, ...] = ("latent", "phase", "value"), horizons_s: tuple[float, ...] = HORIZONS_S,
+                 inputs: tuple[str, ...] = ("latent", "phase"), horizons_s: tuple[float, ...] = HORIZONS_S,
                  margin: float | None = None, epochs: int = 20, seed: int = 0) -> SurvivalEstimate:
     """Fit, calibrate and choose (module doc) on recorded states ``data`` (the columns of
     :mod:`gaitlib.collection.survival`, rows in episode and time order, control period ``dt`` s). ``margin``: use

@@ -1,0 +1,60 @@
+"""The guard's decision on a robot, from the folder ``gaitlib survival export`` writes: numpy and onnxruntime only.
+
+Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, and the reference
+phase; it answers whether to switch now, to which gait and destination phase.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+
+EPS = 1e-6
+
+
+def sigmoid(z):
+    return 1.0 / (1.0 + np.exp(-z))
+
+
+class RobotGuard:
+    def __init__(self, folder):
+        folder = Path(folder)
+        self.spec = json.loads((folder / "guard.json").read_text())
+        self.gaits = self.spec["gaits"]
+        self.latent = {g: ort.InferenceSession(str(folder / f"latent_{g}.onnx")) for g in self.gaits}
+        self.survival = ort.InferenceSession(str(folder / "survival.onnx"))
+        self.net = ort.InferenceSession(str(folder / "net.onnx"))
+        self.candidates = np.asarray(self.spec["candidates"], dtype=np.float32)
+
+    def read(self, gait, obs, phase):
+        """(staying up, {other gait: (calibrated offer, best destination phase)})."""
+        m, count = self.gaits.index(gait), len(self.gaits)
+        psi = self.latent[gait].run(None, {"obs": obs.reshape(1, -1).astype(np.float32)})[0][0]
+        angle = 2 * np.pi * phase
+        x = np.concatenate([np.eye(count)[m], psi, [np.sin(angle), np.cos(angle)]]).astype(np.float32)
+        a, b = self.spec["survival_platt"][gait]
+        stay = sigmoid(a * self.survival.run(None, {"features": x[None]})[0][0] + b)
+        offers = {}
+        for n, dest in enumerate(self.gaits):
+            if n == m:
+                continue
+            angles = 2 * np.pi * self.candidates
+            rows = np.concatenate([
+                np.tile(np.concatenate([np.eye(count)[m], np.eye(count)[n], psi]), (len(angles), 1)),
+                np.stack([np.sin(angles), np.cos(angles)], axis=1),
+            ], axis=1).astype(np.float32)
+            score = np.clip(sigmoid(self.net.run(None, {"features": rows})[0]), EPS, 1 - EPS)
+            a, b = self.spec["net_calibration"].get(f"{gait}-{dest}", (1.0, 0.0))
+            p = sigmoid(a * np.log(score / (1 - score)) + b)
+            best = int(np.argmax(p))
+            offers[dest] = (float(p[best]), float(self.candidates[best]))
+        return float(stay), offers
+
+    def decide(self, gait, obs, phase):
+        """(gait, destination phase) to switch to at once, or None to keep the gait."""
+        stay, offers = self.read(gait, obs, phase)
+        dest = max(offers, key=lambda g: offers[g][0])
+        if offers[dest][0] - stay > self.spec["margin"]:
+            return dest, offers[dest][1]
+        return None

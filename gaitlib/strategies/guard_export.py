@@ -1,0 +1,100 @@
+"""The guard in deployable form (``gaitlib survival export``): what a robot-side loop needs to make the guard's
+decision with numpy and onnxruntime alone (``docs/deploying.md``, "The guard on the robot").
+
+Written into one folder:
+
+* ``latent_GAIT.onnx`` per gait: the actor observation (N, its width) to the actor's last hidden layer psi_m (N, L),
+  the actor's observation normalizer included (the same observation ``GAIT/policy.onnx`` reads);
+* ``survival.onnx``: the survival estimate's inputs (N, G + L + 2: one-hot gait, psi_m, sin and cos of 2 pi phase)
+  to its logit (standardization included);
+* ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
+  to its logit;
+* ``guard.json``: the gaits, the policies' identities, the estimate's horizon, margin and Platt (a, b) per gait
+  (``sigmoid(a * logit + b)``), the net's calibration per ordered pair (``sigmoid(a * logit(clip(sigmoid(z),
+  1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
+
+An estimate that reads the critic's value is refused in one line: the critic sees privileged simulator quantities a
+robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import torch
+
+from gaitlib.atomic import atomic_path, write_json
+from gaitlib.errors import GaitlibError
+from gaitlib.strategies.base import phase_grid
+from gaitlib.strategies.calibration import Calibration
+from gaitlib.strategies.survival import SurvivalEstimate
+from gaitlib.transition_net.model import TransitionNet
+
+__all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
+
+DEPLOYABLE_INPUTS = ("latent", "phase")
+"""The only survival inputs a robot-side loop computes from its own observations."""
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 1}
+
+
+class _Latent(torch.nn.Module):
+    """Actor observation -> psi_m: the actor's normalizer, then its hidden layers."""
+
+    def __init__(self, policy) -> None:
+        super().__init__()
+        self.normalizer = policy.actor.obs_normalizer
+        self.hidden = policy._hidden
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.hidden(self.normalizer(obs))
+
+
+def _export(module: torch.nn.Module, width: int, path: Path, *, inputs: str, output: str) -> None:
+    with atomic_path(path) as tmp, warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=DeprecationWarning)  # the TorchScript exporter, on purpose
+        torch.onnx.export(module.eval(), (torch.zeros(1, width),), str(tmp), export_params=True, opset_version=18,
+                          input_names=[inputs], output_names=[output],
+                          dynamic_axes={inputs: {0: "batch"}, output: {0: "batch"}}, dynamo=False)
+
+
+def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, net: TransitionNet,
+                 calibration: Calibration) -> Path:
+    """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
+    :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
+    ``guard.json``."""
+    if tuple(estimate.inputs) != DEPLOYABLE_INPUTS:
+        raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "
+                           f"{' and '.join(DEPLOYABLE_INPUTS)} (the critic's value reads privileged simulator "
+                           "quantities): fit it with gaitlib survival fit --inputs latent,phase")
+    if net.spec.kind != "latent":
+        raise GaitlibError(f"the transition-net reads '{net.spec.kind}' inputs; the exported guard needs a latent net")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    gaits = estimate.gaits
+    for gait, policy in zip(gaits, policies, strict=True):
+        obs_width = policy.actor.mlp[0].in_features
+        _export(_Latent(policy).cpu(), obs_width, folder / f"latent_{gait}.onnx", inputs="obs", output="latent")
+
+    class _Logit(torch.nn.Module):
+        def __init__(self, model: torch.nn.Module) -> None:
+            super().__init__()
+            self.model = model
+
+        def forward(self, features: torch.Tensor) -> torch.Tensor:
+            return self.model(features)
+
+    _export(_Logit(estimate.net).cpu(), int(estimate.net.mean.numel()), folder / "survival.onnx",
+            inputs="features", output="logit")
+    _export(_Logit(net).cpu(), net.spec.dim, folder / "net.onnx", inputs="features", output="logit")
+    return write_json(folder / "guard.json", _FORMAT | {
+        "gaits": list(gaits),
+        "library_identities": estimate.identities,
+        "horizon_s": estimate.horizon_s,
+        "margin": estimate.margin,
+        "survival_platt": {gaits[k]: list(ab) for k, ab in estimate.platt.items()},
+        "net_calibration": {f"{gaits[m]}-{gaits[n]}": list(ab) for (m, n), ab in calibration.pairs.items()},
+        "candidates": phase_grid().tolist(),
+        "rule": "catch into the gait whose best calibrated offer beats the calibrated survival estimate by more than "
+                "the margin, at once; then hold it for horizon_s before the requested gait is switched to again",
+    }, checksum=True)
