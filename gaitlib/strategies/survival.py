@@ -26,7 +26,7 @@ import torch
 
 from gaitlib.atomic import atomic_path, file_sha256
 from gaitlib.errors import GaitlibError, TransitionDataError
-from gaitlib.library.layout import check_identities
+from gaitlib.library.layout import check_identities, is_shipped
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import platt
 
@@ -281,9 +281,11 @@ def load_survival(library: Library, gaits: tuple[str, ...]) -> SurvivalEstimate:
     """``library``'s survival estimate for ``gaits``; one line when it has none, when it is damaged, or when it
     was recorded with other policies (stale: record it again)."""
     path = library.switching_dir / SURVIVAL_FILE
-    again = f"record and fit it again: gaitlib survival record --library {library.root}"
+    commands = (f"gaitlib survival record --library {library.root} --out data/survival.h5 && gaitlib survival fit "
+                f"data/survival.h5 --library {library.root}" + (" --replace" if is_shipped(library.root) else ""))
+    again = f"record and fit it again: {commands}"
     if not path.is_file():
-        raise GaitlibError(f"library {library.root} has no survival estimate; {again}")
+        raise GaitlibError(f"library {library.root} has no survival estimate; make one: {commands}")
     try:
         saved = torch.load(path, map_location="cpu", weights_only=True)
         meta = saved["metadata"]
