@@ -17,8 +17,8 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.envs import EnvConfig
+from gaitlib.evaluation import evaluate_policy
 from gaitlib.library import Library
-from gaitlib.training.evaluate import evaluate_policy
 
 RUNS = (("no pushes", 0.0, None), ("push <= 50 N", 50.0, None), ("push <= 100 N", 100.0, None),
         ("push <= 150 N", 150.0, None), ("action on time", 0.0, 0), ("action 1 step late", 0.0, 1))

@@ -25,13 +25,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from gaitlib.atomic import write_json
-from gaitlib.benchmark.push_curve import single_push_curve
-from gaitlib.benchmark.switch_in import switch_in
 from gaitlib.defaults import BAR_HEADING_DEG, BAR_SPEED
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.handover import load_states
+from gaitlib.evaluation import evaluate_policy, single_push_curve, switch_in
 from gaitlib.library import Library
-from gaitlib.training.evaluate import evaluate_policy
 from gaitlib.values import IMPULSE_NS, parse_values
 
 __all__ = ["ablation_row"]

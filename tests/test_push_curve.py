@@ -7,8 +7,8 @@ import json
 
 from cli_runner import gaitlib_quick
 
-from gaitlib.benchmark.push_curve import SECTORS, single_push_curve
 from gaitlib.envs import EnvConfig
+from gaitlib.evaluation import SECTORS, PushPoint, single_push_curve
 from gaitlib.library import Library
 from gaitlib.library.layout import shipped_library_dir
 
@@ -22,10 +22,11 @@ def test_a_harder_push_fells_more_and_every_direction_is_hit() -> None:
     )
     quiet, hard = points
     assert (quiet.impulse_ns, hard.impulse_ns) == (0.0, 60.0) and hard.force_n == 60.0 / (3 / 30)
-    assert quiet.falls == 0 and hard.falls > quiet.falls  # 60 N s: 4.8 m/s for the A1
-    assert hard.ci95[0] <= hard.fall_rate <= hard.ci95[1]
+    assert quiet.fell == 0 and hard.fell > quiet.fell  # 60 N s: 4.8 m/s for the A1
+    assert hard.fall_ci95[0] <= hard.fall_rate <= hard.fall_ci95[1]
     assert sum(k for _, k in hard.by_sector.values()) == 24 and set(hard.by_sector) == set(SECTORS)
     assert all(k > 0 for _, k in hard.by_sector.values())
+    assert PushPoint.from_dict(json.loads(json.dumps(hard.as_dict()))) == hard  # a stored curve reads back whole
 
 
 def test_the_command_prints_the_curve_and_plots_it(tmp_path) -> None:

@@ -198,8 +198,8 @@ def test_an_impossible_lever_is_one_line(fields, line) -> None:
 def test_switching_in_from_recorded_states_counts_falls_and_touches(tmp_path) -> None:
     """The stand takes over robots recorded while the trot ran, at random moments: every handed-over world is
     judged once; a source the states do not hold is one line."""
-    from gaitlib.benchmark.switch_in import switch_in
     from gaitlib.envs.handover import load_states
+    from gaitlib.evaluation import switch_in
     from gaitlib.library.layout import shipped_library_dir
 
     recorded = gaitlib_quick("states", "--gaits", "trot,stand", "--per-gait", "16", "--worlds", "8", "--backend",
@@ -211,8 +211,8 @@ def test_switching_in_from_recorded_states_counts_falls_and_touches(tmp_path) ->
     env_cfg = library.shared_policy_settings(["stand"]).env_config(EnvConfig())
     result = switch_in(stand.policy, stand.clip, env_cfg=env_cfg, states=states, source="trot", episodes=12,
                        horizon_s=1.0, backend="mujoco", seed=3)
-    assert result.episodes == 12 and 0 <= result.falls <= 12 and 0 <= result.touches <= 12
-    assert result.fall_ci95[0] <= result.falls / 12 <= result.fall_ci95[1] and result.falls_definition == "trunk"
+    assert result.episodes == 12 and 0 <= result.fell <= 12 and 0 <= result.touched <= 12
+    assert result.fall_ci95[0] <= result.fell / 12 <= result.fall_ci95[1] and result.falls == "trunk"
     with pytest.raises(GaitlibError, match="the states hold none recorded while 'walk' ran"):
         switch_in(stand.policy, stand.clip, env_cfg=env_cfg, states=states, source="walk", episodes=2)
 

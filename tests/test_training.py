@@ -194,9 +194,9 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
     """The trot's reference runs at a constant 1.45 m/s: over 30 steps the mean is that, not 29/30 of it (the step
     that ends an episode counts for its length, not for the means); and its feet keep to its contact plan."""
     from gaitlib.envs import EnvConfig
+    from gaitlib.evaluation import evaluate_policy
     from gaitlib.library import Library
     from gaitlib.library.layout import shipped_library_dir
-    from gaitlib.training.evaluate import evaluate_policy
 
     library = Library(shipped_library_dir())
     trot = library.entry("trot")
@@ -217,9 +217,9 @@ def test_eval_averages_over_the_steps_it_sums() -> None:
 
 def test_eval_counts_each_fall_under_the_terminations_it_met() -> None:
     from gaitlib.envs import EnvConfig
+    from gaitlib.evaluation import evaluate_policy
     from gaitlib.library import Library
     from gaitlib.library.layout import shipped_library_dir
-    from gaitlib.training.evaluate import evaluate_policy
 
     library = Library(shipped_library_dir())
     trot = library.entry("trot")

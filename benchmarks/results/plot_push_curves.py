@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from gaitlib.benchmark.push_curve import PushPoint, write_push_plot
+from gaitlib.evaluation import PushPoint, write_push_plot
 
 
 def main() -> None:
@@ -18,7 +18,7 @@ def main() -> None:
     curves = {}
     for path in files:
         points = json.loads(path.read_text())["points"]
-        curves[path.stem] = [PushPoint(**(p | {"ci95": tuple(p["ci95"])})) for p in points]
+        curves[path.stem] = [PushPoint.from_dict(p) for p in points]
     write_push_plot(curves, out)
     print(out)
 

@@ -1,10 +1,10 @@
 """A gait's push figures on the meta-controller, with the guard on or off on the same draws: the single-shove curve
-of :mod:`gaitlib.benchmark.push_curve` (``gaitlib eval GAIT --impulses ... --guard``) and episodes under the paper's
+of :mod:`gaitlib.evaluation.push_curve` (``gaitlib eval GAIT --impulses ... --guard``) and episodes under the paper's
 random pushes (``gaitlib eval GAIT --push-max N --guard``: falls, and the guard's catches per minute; at 0 N every
 catch is a false one, the guard's cost).
 
 Every world of the library's environment starts in the gait measured and is shoved once exactly as in
-:func:`~gaitlib.benchmark.push_curve.single_push_curve` (same settle time, window, duration, sectors, fall
+:func:`~gaitlib.evaluation.push_curve.single_push_curve` (same settle time, window, duration, sectors, fall
 definition); no switch is requested. Guarded, the guard may catch a world into another gait and return it to the
 measured one (:mod:`gaitlib.meta.guard`). Each point reports, beside the falls, every catch: from which gait to
 which, what the estimate and the net read, the detection delay (control steps from the shove's start to the catch;
@@ -13,7 +13,6 @@ a catch before the shove is a false catch) and how long until the measured gait 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -24,12 +23,11 @@ from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import FallTally, TerminationConfig
-from gaitlib.benchmark.push_curve import AFTER_S, SECTORS, SETTLE_S, PushPoint
+from gaitlib.evaluation import AFTER_S, SECTORS, SETTLE_S, FallRecord, PushPoint
 from gaitlib.meta.guard import Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
-from gaitlib.stats import wilson_interval
 
 __all__ = ["guarded_episodes", "guarded_push_curve"]
 
@@ -84,13 +82,12 @@ def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, e
     finally:
         sim.close()
     sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
-    fell, touched, longest = tally.fell.cpu(), tally.touched, tally.longest
+    fell = tally.fell.cpu()
     by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
-    falls, touches = int(fell.sum()), int(touched.sum())
-    point = PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector, touches,
-                      wilson_interval(touches, n), float(longest.max()) * dt, cfg.termination.falls)
-    return dataclasses.replace(point, guard=_guard_summary(guard, catches, start.cpu(), setup.gaits, dt,
-                                                           measured_steps / max(1, steps)))
+    counted = FallRecord(episodes=n, fell=int(fell.sum()), touched=int(tally.touched.sum()),
+                         longest_touch_s=float(tally.longest.max()) * dt, falls=cfg.termination.falls)
+    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=force, by_sector=by_sector,
+                     guard=_guard_summary(guard, catches, start.cpu(), setup.gaits, dt, measured_steps / max(1, steps)))
 
 
 def _guard_summary(guard: Guard | None, catches: list, start: torch.Tensor, gaits: tuple[str, ...], dt: float,
@@ -137,13 +134,14 @@ def guarded_episodes(setup: SwitchingSetup, gait: str, *, guard: Guard | None, e
                 alive &= ~result.fell & (env.episode_length_buf > 0)
     finally:
         sim.close()
-    fell, touched = int(tally.fell.sum()), int(tally.touched.sum())
+    counted = FallRecord(episodes=n, fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
+                         longest_touch_s=float(tally.longest.max()) * dt, falls=cfg.termination.falls)
     minutes = steps * dt / 60
     summary = _guard_summary(guard, catches, torch.full((n,), -1), setup.gaits, dt, measured_steps / max(1, steps))
     summary.pop("false_catches"), summary.pop("delay_steps_median")  # no shove to measure them from
     for c in summary["catches"]:
         c.pop("delay_steps")
-    return {"gait": gait, "episodes": n, "seconds": seconds, "push_max_n": push_max, "falls": fell,
-            "fall_rate": fell / n, "ci95": wilson_interval(fell, n), "touches": touched,
-            "falls_definition": str(falls), "minutes": minutes,
+    return {"gait": gait, "episodes": n, "seconds": seconds, "push_max_n": push_max, "falls": counted.fell,
+            "fall_rate": counted.fall_rate, "ci95": counted.fall_ci95, "touches": counted.touched,
+            "falls_definition": counted.falls.value, "minutes": minutes,
             "catches_per_min": len(catches) / minutes if minutes > 0 else None, "guard": summary}

@@ -131,9 +131,9 @@ def guarded_curve(gait: str, library: Path | None, impulses, margin: float | Non
     of ``seconds`` under pushes of up to ``push_max`` N; unguarded and guarded on the same draws, with the guard's
     catches. ``other``: an option the guarded evaluation does not take was given (refused)."""
     from gaitlib.benchmark.guarded_push import guarded_push_curve
-    from gaitlib.benchmark.push_curve import write_push_plot
     from gaitlib.cli.options import OptionError
     from gaitlib.cli.tables import rate_text
+    from gaitlib.evaluation import write_push_plot
     from gaitlib.meta import load_switching
     from gaitlib.strategies.survival import check_guard
 
@@ -173,8 +173,8 @@ def guarded_curve(gait: str, library: Path | None, impulses, margin: float | Non
     for off, on in zip(curves["unguarded"], curves["guarded"], strict=True):
         worst = max(on.by_sector.items(), key=lambda kv: kv[1][0] / max(1, kv[1][1]))
         delay = on.guard["delay_steps_median"]
-        table.add_row(f"{on.impulse_ns:g}", rate_text(off.fall_rate, off.ci95, digits=1),
-                      rate_text(on.fall_rate, on.ci95, digits=1), f"{worst[0]} {worst[1][0]}/{worst[1][1]}",
+        table.add_row(f"{on.impulse_ns:g}", rate_text(off.fall_rate, off.fall_ci95, digits=1),
+                      rate_text(on.fall_rate, on.fall_ci95, digits=1), f"{worst[0]} {worst[1][0]}/{worst[1][1]}",
                       str(len(on.guard["catches"])), str(on.guard["false_catches"]),
                       "-" if delay is None else f"{delay:g}", f"{100 * on.guard['measured_gait_share']:.1f}%")
     table_console().print(table)

@@ -202,8 +202,8 @@ def train_command(
 def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int, plot: Path | None,
                 as_json: bool, falls: Falls) -> None:
     """``gaitlib eval GAIT --impulses ...``: the single-push curve as a table (or JSON) and a plot."""
-    from gaitlib.benchmark.push_curve import SECTORS, single_push_curve, write_push_plot
     from gaitlib.envs import EnvConfig
+    from gaitlib.evaluation import SECTORS, single_push_curve, write_push_plot
 
     points = single_push_curve(
         entry.policy, entry.clip, env_cfg=lib.shared_policy_settings([entry.name]).env_config(EnvConfig()),
@@ -224,8 +224,8 @@ def _push_curve(entry, lib, impulses, *, episodes: int, backend: str, seed: int,
         table.add_column(column, justify="right")
     for p in points:
         sectors = (f"{f}/{k}" for f, k in p.by_sector.values())
-        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate_text(p.fall_rate, p.ci95, digits=1), *sectors,
-                      rate_text(p.touches / p.episodes, p.touch_ci95, digits=1), f"{p.longest_touch_s:.2f}")
+        table.add_row(f"{p.impulse_ns:g}", f"{p.force_n:.0f}", rate_text(p.fall_rate, p.fall_ci95, digits=1),
+                      *sectors, rate_text(p.touch_rate, p.touch_ci95, digits=1), f"{p.longest_touch_s:.2f}")
     table_console().print(table)
 
 
@@ -288,8 +288,8 @@ def eval_command(
     errors; or, with --impulses, its fall rate against a single push's impulse (with --guard, guarded and not)."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
     from gaitlib.envs import EnvConfig
+    from gaitlib.evaluation import evaluate_policy
     from gaitlib.library import Library
-    from gaitlib.training.evaluate import evaluate_policy
 
     check_worlds("--episodes", episodes, backend=backend)
     values = None if impulses is None else parse_values(impulses, option="--impulses", bounds=IMPULSE_NS,

@@ -1,4 +1,5 @@
-"""Training gait policies with rsl-rl PPO into a library (:mod:`gaitlib.library`), and their evaluation."""
+"""Training gait policies with rsl-rl PPO into a library (:mod:`gaitlib.library`), each evaluated as it is written
+(:mod:`gaitlib.evaluation`)."""
 
 from gaitlib.training.presets import TrainPreset, get_preset, preset_names
 

@@ -24,6 +24,7 @@ from gaitlib.atomic import atomic_path, release_lock, take_lock
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.errors import GaitlibError
+from gaitlib.evaluation import EvalResult, evaluate_policy
 from gaitlib.gaits import GaitDescription, ReferenceClip, clip_from_description
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.library.store import Library
@@ -31,7 +32,6 @@ from gaitlib.library.target import copy_library, library_writer
 from gaitlib.sim import make_backend, resolve_backend_name
 from gaitlib.training.checkpoint import check_same_run, read_checkpoint, run_identity, start_over
 from gaitlib.training.distributed import Ranks, agree, join, leave, parameters_in_sync, rank_device
-from gaitlib.training.evaluate import EvalResult, evaluate_policy
 from gaitlib.training.iteration_log import IterationLog, IterationStats, write_scalars
 from gaitlib.training.presets import TrainPreset, rsl_rl_config
 from gaitlib.training.recipe import Recipe

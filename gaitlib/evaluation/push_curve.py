@@ -15,19 +15,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import torch
 
 from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import FallTally
+from gaitlib.evaluation.rollout import FallRecord, rollout
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
-from gaitlib.stats import wilson_interval
 
 __all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "single_push_curve", "write_push_plot"]
 
@@ -39,37 +38,38 @@ SECTORS = ("front", "left", "back", "right")
 """Push directions relative to the robot's heading at the push, 90 degrees each, centred on these."""
 
 
-@dataclass(frozen=True)
-class PushPoint:
-    """Falls under one impulse."""
+@dataclass(frozen=True, kw_only=True)
+class PushPoint(FallRecord):
+    """Falls and touches under one impulse (:class:`FallRecord`)."""
 
     impulse_ns: float
     """Impulse of the push, N s (force x duration)."""
     force_n: float
     """Its force, N."""
-    episodes: int
-    falls: int
-    fall_rate: float
-    ci95: tuple[float, float]
-    """Wilson 95% interval of the fall rate."""
     by_sector: dict[str, tuple[int, int]]
     """Sector -> (falls, episodes)."""
-    touches: int
-    """Episodes in which a non-foot body touched the ground while the robot was up (a fall or not)."""
-    touch_ci95: tuple[float, float]
-    """Wilson 95% interval of ``touches / episodes``."""
-    longest_touch_s: float
-    """The longest unbroken touch over the episodes, s."""
-    falls_definition: Falls = DEFAULT_FALLS
-    """What a fall was."""
-
     guard: dict | None = None
     """On the meta-controller (:mod:`gaitlib.benchmark.guarded_push`): whether the guard was on, its margin and
     horizon, each catch, the false catches and detection delays, the share of time the measured gait ran;
     ``None``: the gait's own policy alone."""
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The point as ``gaitlib eval --impulses --json`` prints it (the fall count as ``falls``, the definition as
+        ``falls_definition``, as stored curves hold them)."""
+        return {
+            "impulse_ns": self.impulse_ns, "force_n": self.force_n, "episodes": self.episodes, "falls": self.fell,
+            "fall_rate": self.fall_rate, "ci95": self.fall_ci95, "by_sector": dict(self.by_sector),
+            "touches": self.touched, "touch_ci95": self.touch_ci95, "longest_touch_s": self.longest_touch_s,
+            "falls_definition": self.falls.value, "guard": self.guard,
+        }
+
+    @classmethod
+    def from_dict(cls, point: dict) -> PushPoint:
+        """A point as :meth:`as_dict` wrote it (one written before the definition was recorded: ``trunk``)."""
+        return cls(impulse_ns=point["impulse_ns"], force_n=point["force_n"], episodes=point["episodes"],
+                   fell=point["falls"], touched=point["touches"], longest_touch_s=point["longest_touch_s"],
+                   falls=Falls(point.get("falls_definition", DEFAULT_FALLS)),
+                   by_sector={name: tuple(n) for name, n in point["by_sector"].items()}, guard=point.get("guard"))
 
 
 def single_push_curve(
@@ -108,31 +108,25 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
         length = max(1, round(duration_s / dt))
         angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)  # relative to the heading at the push
         force = impulse / (length * dt)
-        alive = torch.ones(n, dtype=torch.bool, device=dev)
-        tally = FallTally(n, dev)
-        obs = env.get_observations()
-        with torch.inference_mode():
-            for step in range(env.max_episode_length):
-                begins, ends = (start == step) & alive, (start + length == step) & alive
-                if begins.any():
-                    ids = begins.nonzero().squeeze(1)
-                    heading = yaw_of(env.sim_state.root_quat[ids]) + angle[ids]
-                    push = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
-                    env.backend.set_trunk_force(ids, force * push)
-                if ends.any():
-                    ids = ends.nonzero().squeeze(1)
-                    env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
-                obs, _, dones, extras = env.step(policy.act(obs))
-                tally.step(dones, extras, alive)
-                alive &= ~dones
+
+        def push(step: int, alive: torch.Tensor) -> None:
+            begins, ends = (start == step) & alive, (start + length == step) & alive
+            if begins.any():
+                ids = begins.nonzero().squeeze(1)
+                heading = yaw_of(env.sim_state.root_quat[ids]) + angle[ids]
+                direction = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
+                env.backend.set_trunk_force(ids, force * direction)
+            if ends.any():
+                ids = ends.nonzero().squeeze(1)
+                env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
+
+        counted, tally = rollout(env, policy, steps=env.max_episode_length, before=push)
     finally:
         sim.close()
     sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
-    fell, touched, longest = tally.fell.cpu(), tally.touched, tally.longest
+    fell = tally.fell.cpu()
     by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
-    falls, touches = int(fell.sum()), int(touched.sum())
-    return PushPoint(impulse, force, n, falls, falls / n, wilson_interval(falls, n), by_sector, touches,
-                     wilson_interval(touches, n), float(longest.max()) * dt, cfg.termination.falls)
+    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=force, by_sector=by_sector)
 
 
 def write_push_plot(curves: dict[str, list[PushPoint]], path) -> None:
@@ -148,7 +142,7 @@ def write_push_plot(curves: dict[str, list[PushPoint]], path) -> None:
     for label, points in curves.items():
         x = [p.impulse_ns for p in points]
         ax.plot(x, [100 * p.fall_rate for p in points], marker="o", label=label)
-        ax.fill_between(x, [100 * p.ci95[0] for p in points], [100 * p.ci95[1] for p in points], alpha=0.2)
+        ax.fill_between(x, [100 * p.fall_ci95[0] for p in points], [100 * p.fall_ci95[1] for p in points], alpha=0.2)
     ax.set_xlabel("impulse of one 0.1 s push, N s (12 N s: about 1 m/s for the A1)")
     ax.set_ylabel("episodes that fall, %")
     ax.grid(alpha=0.3)

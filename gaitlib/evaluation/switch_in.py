@@ -5,7 +5,7 @@ the measure of the gait itself (the switch-start training it was given shows her
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -14,36 +14,34 @@ from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import FallTally, TerminationConfig
+from gaitlib.envs.terminations import TerminationConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.evaluation.rollout import FallRecord, rollout
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.sim import make_backend
-from gaitlib.stats import wilson_interval
 
 __all__ = ["SwitchIn", "switch_in"]
 
 
-@dataclass(frozen=True)
-class SwitchIn:
-    """Switches into a gait from one source gait's recorded states."""
+@dataclass(frozen=True, kw_only=True)
+class SwitchIn(FallRecord):
+    """Switches into a gait from one source gait's recorded states: its falls and touches within the horizon
+    (:class:`FallRecord`)."""
 
     source: str
     """The gait the robots were handed over from."""
-    episodes: int
     horizon_s: float
     """Time after the handover within which no fall makes a success, s."""
-    falls: int
-    fall_ci95: tuple[float, float]
-    """Wilson 95% interval of ``falls / episodes``."""
-    touches: int
-    """Episodes in which a non-foot body touched the ground while up."""
-    touch_ci95: tuple[float, float]
-    longest_touch_s: float
-    falls_definition: Falls
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The measure as an ablation row records it (the fall count as ``falls``, the definition as
+        ``falls_definition``)."""
+        return {
+            "source": self.source, "episodes": self.episodes, "horizon_s": self.horizon_s, "falls": self.fell,
+            "fall_ci95": self.fall_ci95, "touches": self.touched, "touch_ci95": self.touch_ci95,
+            "longest_touch_s": self.longest_touch_s, "falls_definition": self.falls.value,
+        }
 
 
 def switch_in(
@@ -73,18 +71,9 @@ def switch_in(
     sim = make_backend(backend, num_worlds=episodes)
     try:
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
-        dev, n = env.device, env.num_envs
-        env.hand_over(torch.arange(n, device=dev), states.select(chosen), torch.rand(n, generator=gen))
-        alive, tally = torch.ones(n, dtype=torch.bool, device=dev), FallTally(n, dev)
-        obs = env.get_observations()
-        with torch.inference_mode():
-            for _ in range(round(horizon_s / env.dt)):
-                obs, _, dones, extras = env.step(policy.act(obs))
-                tally.step(dones, extras, alive)
-                alive &= ~dones
-        dt = env.dt
+        n = env.num_envs
+        env.hand_over(torch.arange(n, device=env.device), states.select(chosen), torch.rand(n, generator=gen))
+        counted, _ = rollout(env, policy, steps=round(horizon_s / env.dt))
     finally:
         sim.close()
-    down, touches = int(tally.fell.sum()), int(tally.touched.sum())
-    return SwitchIn(source, n, horizon_s, down, wilson_interval(down, n), touches, wilson_interval(touches, n),
-                    float(tally.longest.max()) * dt, falls)
+    return SwitchIn(**counted.counted(), source=source, horizon_s=horizon_s)

@@ -2,44 +2,31 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import torch
 
 from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import FallTally
+from gaitlib.evaluation.rollout import FallRecord, rollout
 from gaitlib.gaits import ReferenceClip
 from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import make_backend
-from gaitlib.stats import wilson_interval
 
 __all__ = ["EvalResult", "evaluate_policy"]
 
 
-@dataclass(frozen=True)
-class EvalResult:
-    """How well a policy imitates its gait."""
+@dataclass(frozen=True, kw_only=True)
+class EvalResult(FallRecord):
+    """How well a policy imitates its gait: its falls and touches (:class:`FallRecord`; a fall ends an episode
+    before ``seconds``: the trunk sank too low, tilted more than 90 degrees or touched the ground, and with
+    ``contact`` any non-foot body touched it; turning away is not a fall, see ``heading_loss_rate``), and how it
+    follows its reference."""
 
-    episodes: int
-    """Episodes run (one per world)."""
     seconds: float
     """Episode length asked for, s."""
-    fall_rate: float
-    """Fraction of episodes that ended in a fall before ``seconds``, 0-1, by the definition ``falls``: the trunk
-    sank too low, tilted more than 90 degrees or touched the ground (and with ``contact``, any non-foot body touched
-    it); turning away is not a fall (see ``heading_loss_rate``)."""
-    fall_ci95: tuple[float, float]
-    """Wilson 95% interval of ``fall_rate``."""
-    touch_rate: float
-    """Fraction of episodes in which a non-foot body (a leg's thigh or calf, or the trunk) touched the ground while
-    the robot was up, 0-1: the touches ridden through are counted here whether or not they were falls."""
-    touch_ci95: tuple[float, float]
-    """Wilson 95% interval of ``touch_rate``."""
-    longest_touch_s: float
-    """The longest unbroken touch of a non-foot body over all episodes, s (0: none)."""
     heading_loss_rate: float
     """Fraction of episodes in which the robot, still up, turned more than 90 degrees away from its starting
     heading at some moment, 0-1."""
@@ -65,9 +52,6 @@ class EvalResult:
     """Control steps every action waited (``None``: the randomized delay of training)."""
     late_steps: int
     """Control steps every action waited beyond that (the trained range shifted; 0: as trained)."""
-    falls: Falls
-    """The definition of a fall counted: ``trunk`` (the
-    field's) or ``contact`` (a non-foot body on the ground is a fall too)."""
     falls_by_cause: dict[str, int]
     """Falls that met each termination (``body_contact``: a non-foot body on the ground, with ``contact`` only;
     ``trunk_contact``: the trunk itself on the ground; ``too_low``: the trunk below 0.12 m; ``orientation_lost``:
@@ -75,7 +59,18 @@ class EvalResult:
     ``body_contact`` alone ended with the trunk still above 0.12 m and tilted less than 90 degrees."""
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The evaluation as ``gaitlib eval --json`` prints it and an entry's metadata records it."""
+        return {
+            "episodes": self.episodes, "seconds": self.seconds, "fall_rate": self.fall_rate,
+            "fall_ci95": self.fall_ci95, "touch_rate": self.touch_rate, "touch_ci95": self.touch_ci95,
+            "longest_touch_s": self.longest_touch_s, "heading_loss_rate": self.heading_loss_rate,
+            "median_heading_change_deg": self.median_heading_change_deg, "joint_rmse": self.joint_rmse,
+            "contact_agreement": self.contact_agreement, "forward_speed": self.forward_speed,
+            "reference_speed": self.reference_speed, "speed_error": self.speed_error,
+            "mean_episode_seconds": self.mean_episode_seconds, "push_max": self.push_max,
+            "action_delay_steps": self.action_delay_steps, "late_steps": self.late_steps, "falls": self.falls.value,
+            "falls_by_cause": dict(self.falls_by_cause),
+        }
 
 
 def evaluate_policy(
@@ -97,8 +92,7 @@ def evaluate_policy(
     ``env_cfg`` holds the policy's action and observation settings; its episode length, pushes and terminations
     are set here. ``action_delay_steps`` fixes the control steps every action waits (``None``: the randomized
     delay of training); ``late_steps`` delays every action that many control steps more (a step late: 1).
-    ``falls``: the definition of a fall counted (``trunk`` or ``contact``,
-    :mod:`gaitlib.envs.terminations`); leg touches are counted beside it either way.
+    ``falls``: the definition of a fall counted; leg touches are counted beside it either way.
     """
     randomization = env_cfg.randomization
     if action_delay_steps is not None:
@@ -115,21 +109,14 @@ def evaluate_policy(
     sim = make_backend(backend, num_worlds=episodes)
     try:
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
-        t = _run_episodes(env, policy)
-        counted = t["alive_steps"].clamp(min=1)
+        counted, t = _run_episodes(env, policy)
         total_alive = t["summed_steps"].sum().clamp(min=1)  # the steps whose speeds and errors were summed
         mean_speed = float(t["speed"].sum() / total_alive)
         mean_ref = float(t["ref_speed"].sum() / total_alive)
         error = abs(mean_speed - mean_ref)
-        n, fell, touched = env.num_envs, int(t["fell"].sum()), int(t["touched"].sum())
         return EvalResult(
-            episodes=n,
+            **counted.counted(),
             seconds=seconds,
-            fall_rate=fell / n,
-            fall_ci95=wilson_interval(fell, n),
-            touch_rate=touched / n,
-            touch_ci95=wilson_interval(touched, n),
-            longest_touch_s=float(t["longest_touch"].max()) * env.dt,
             heading_loss_rate=float(t["turned"].float().mean()),
             median_heading_change_deg=float(torch.rad2deg(t["heading_change"]).median()),
             joint_rmse=float(torch.sqrt(t["sq_error"].sum() / total_alive)),
@@ -137,42 +124,32 @@ def evaluate_policy(
             forward_speed=mean_speed,
             reference_speed=mean_ref,
             speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
-            mean_episode_seconds=float((counted * env.dt).mean()),
+            mean_episode_seconds=float((t["alive_steps"].clamp(min=1) * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
             late_steps=late_steps,
-            falls=falls,
             falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
         )
     finally:
         sim.close()
 
 
-def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tensor]:
-    """One episode per world of ``env`` with the deterministic policy; per world (N,): fell, the terminations its
-    fall met (``causes``, by name), touched (a non-foot body on the ground while up, or at the fall), the longest
-    unbroken touch (control steps), turned (more than 90 degrees from its start while up), alive steps (the episode's
-    length), the steps summed over (those after which the world was still up), summed squared joint error, share of
-    feet in the reference's contact state, forward and reference speed, and the last absolute heading change while
-    up, rad."""
+def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> tuple[FallRecord, dict[str, torch.Tensor]]:
+    """One episode per world of ``env`` with the deterministic policy (:func:`~gaitlib.evaluation.rollout.rollout`):
+    its falls and touches, and per world (N,): the terminations its fall met (``causes``, by name), turned (more
+    than 90 degrees from its start while up), alive steps (the episode's length), the steps summed over (those after
+    which the world was still up), summed squared joint error, share of feet in the reference's contact state,
+    forward and reference speed, and the last absolute heading change while up, rad."""
     n, dev = env.num_envs, env.device
-    alive = torch.ones(n, dtype=torch.bool, device=dev)
-    t = {"turned": torch.zeros(n, dtype=torch.bool, device=dev)}
-    tally = FallTally(n, dev)
+    t = {"turned": torch.zeros(n, dtype=torch.bool, device=dev), "causes": {}}
     names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
     t |= {k: torch.zeros(n, device=dev) for k in names}
-    t["causes"] = {}
     start_yaw = yaw_of(env.sim_state.root_quat)
-    obs = env.get_observations()
-    for _ in range(env.max_episode_length):
-        obs, _, dones, extras = env.step(policy.act(obs))
+
+    def follow(extras: dict, fell: torch.Tensor, ended: torch.Tensor, alive: torch.Tensor) -> None:
         s, ref = env.sim_state, env.reference.frame()
-        # The rows of worlds that just finished hold their reset state: count only those still alive.
-        ended = dones & alive
-        fell = tally.step(dones, extras, alive)
         for name, met in extras["fall_causes"].items():
             t["causes"][name] = (t["causes"][name] | (fell & met)) if name in t["causes"] else fell & met
-        alive &= ~dones
         live = alive.float()
         yaw = yaw_of(s.root_quat)
         change = torch.remainder(yaw - start_yaw + torch.pi, 2 * torch.pi) - torch.pi
@@ -184,4 +161,6 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> dict[str, torch.Tens
         t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
         t["summed_steps"] += live
         t["alive_steps"] += live + ended.float()  # the step that ends an episode counts for its length
-    return t | {"fell": tally.fell, "touched": tally.touched, "longest_touch": tally.longest}
+
+    counted, _ = rollout(env, policy, steps=env.max_episode_length, after=follow)
+    return counted, t
