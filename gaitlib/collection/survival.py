@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from gaitlib.atomic import atomic_path
-from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import TerminationConfig
@@ -71,7 +71,8 @@ class SurvivalRecording:
     """Time the episode runs after that window, s."""
     record_from_s: float = 0.5
     """States are recorded from this time on, s."""
-    falls: str = DEFAULT_FALLS
+    falls: Falls = DEFAULT_FALLS
+    """The definition of a fall the record counts."""
     backend: str = "mujoco"
     seed: int = 0
 
