@@ -361,7 +361,23 @@ def eval_command(
             ("forward speed (m/s)", f"{result.forward_speed:.3f}"),
             ("reference speed (m/s)", f"{result.reference_speed:.3f}"),
             ("speed error", f"{result.speed_error:.3f}"),
+            *_steering_rows(result.steering),
             ("mean episode length (s)", f"{result.mean_episode_seconds:.2f}"),
         ],
         header=("metric", "value"),
     )
+
+
+def _steering_rows(steering) -> list[tuple[str, str]]:
+    """The rows of ``gaitlib eval``'s table for a gait that sidesteps or turns (none for one that goes straight)."""
+    if steering is None:
+        return []
+    return [
+        ("lateral speed (m/s)", f"{steering.lateral_speed:.3f}"),
+        ("reference lateral speed (m/s)", f"{steering.reference_lateral_speed:.3f}"),
+        ("lateral speed error", f"{steering.lateral_speed_error:.3f}"),
+        ("yaw rate (rad/s)", f"{steering.yaw_rate:.3f}"),
+        ("reference yaw rate (rad/s)", f"{steering.reference_yaw_rate:.3f}"),
+        ("yaw rate error", f"{steering.yaw_rate_error:.3f}"),
+        ("median |heading - reference heading| (deg)", f"{steering.median_heading_error_deg:.1f}"),
+    ]

@@ -4,7 +4,7 @@ tracking under paper Table 1 randomization, :func:`evaluate_policy`), the single
 run one rollout loop and count falls, touches and their intervals in one record (:mod:`~gaitlib.evaluation.rollout`,
 :class:`FallRecord`)."""
 
-from gaitlib.evaluation.evaluate import EvalResult, evaluate_policy
+from gaitlib.evaluation.evaluate import EvalResult, SteeringFigures, evaluate_policy, steers
 from gaitlib.evaluation.push_curve import AFTER_S, SECTORS, SETTLE_S, PushPoint, single_push_curve, write_push_plot
 from gaitlib.evaluation.rollout import FallRecord, rollout
 from gaitlib.evaluation.switch_in import SwitchIn, switch_in
@@ -16,10 +16,12 @@ __all__ = [
     "EvalResult",
     "FallRecord",
     "PushPoint",
+    "SteeringFigures",
     "SwitchIn",
     "evaluate_policy",
     "rollout",
     "single_push_curve",
+    "steers",
     "switch_in",
     "write_push_plot",
 ]

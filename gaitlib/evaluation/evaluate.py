@@ -15,7 +15,47 @@ from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import quat_from_yaw, quat_rotate_inverse, yaw_of
 from gaitlib.sim import make_backend
 
-__all__ = ["EvalResult", "evaluate_policy"]
+__all__ = ["EvalResult", "SteeringFigures", "evaluate_policy", "steers"]
+
+_ZERO = 1e-6
+"""A reference figure at most this (m/s, rad/s) is zero: its error is absolute, not relative."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SteeringFigures:
+    """How a policy follows a reference that sidesteps or turns: its lateral speed and yaw rate against the
+    reference's, and its heading against the reference's heading (which turns with a yaw rate). Each error is
+    relative to the reference's figure, or absolute (m/s, rad/s) where that is zero, as ``speed_error``."""
+
+    lateral_speed: float
+    """Mean lateral speed in the robot's heading frame over alive steps, m/s, positive to the left."""
+    reference_lateral_speed: float
+    """The reference's, m/s."""
+    lateral_speed_error: float
+    """|lateral_speed - reference_lateral_speed| / |reference_lateral_speed| (m/s where that is 0)."""
+    yaw_rate: float
+    """Mean yaw rate over alive steps (the heading's change per control step over its duration), rad/s,
+    positive counter-clockwise."""
+    reference_yaw_rate: float
+    """The reference's, rad/s."""
+    yaw_rate_error: float
+    """|yaw_rate - reference_yaw_rate| / |reference_yaw_rate| (rad/s where that is 0)."""
+    median_heading_error_deg: float
+    """Median over episodes of the absolute angle between the robot's heading and the reference's at the end (or at
+    the fall), degrees: for a turning gait, the heading change against the turn the reference makes."""
+
+    def as_dict(self) -> dict:
+        return {
+            "lateral_speed": self.lateral_speed, "reference_lateral_speed": self.reference_lateral_speed,
+            "lateral_speed_error": self.lateral_speed_error, "yaw_rate": self.yaw_rate,
+            "reference_yaw_rate": self.reference_yaw_rate, "yaw_rate_error": self.yaw_rate_error,
+            "median_heading_error_deg": self.median_heading_error_deg,
+        }
+
+
+def steers(clip: ReferenceClip) -> bool:
+    """Whether ``clip`` sidesteps or turns: a cycle yaw, or a sideways displacement per cycle (over 1 micrometre)."""
+    return clip.cycle_yaw != 0.0 or abs(float(clip.cycle_displacement[1])) > _ZERO
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,6 +92,9 @@ class EvalResult(FallRecord):
     """Control steps every action waited (``None``: the randomized delay of training)."""
     late_steps: int
     """Control steps every action waited beyond that (the trained range shifted; 0: as trained)."""
+    steering: SteeringFigures | None = None
+    """For a gait that sidesteps or turns (:func:`steers`), its lateral speed, yaw rate and heading against the
+    reference's; ``None`` (and not in :meth:`as_dict`) for one that goes straight."""
     falls_by_cause: dict[str, int]
     """Falls that met each termination (``body_contact``: a non-foot body on the ground, with ``contact`` only;
     ``trunk_contact``: the trunk itself on the ground; ``too_low``: the trunk below 0.12 m; ``orientation_lost``:
@@ -70,7 +113,7 @@ class EvalResult(FallRecord):
             "mean_episode_seconds": self.mean_episode_seconds, "push_max": self.push_max,
             "action_delay_steps": self.action_delay_steps, "late_steps": self.late_steps, "falls": self.falls.value,
             "falls_by_cause": dict(self.falls_by_cause),
-        }
+        } | ({} if self.steering is None else {"steering": self.steering.as_dict()})
 
 
 def evaluate_policy(
@@ -113,7 +156,6 @@ def evaluate_policy(
         total_alive = t["summed_steps"].sum().clamp(min=1)  # the steps whose speeds and errors were summed
         mean_speed = float(t["speed"].sum() / total_alive)
         mean_ref = float(t["ref_speed"].sum() / total_alive)
-        error = abs(mean_speed - mean_ref)
         return EvalResult(
             **counted.counted(),
             seconds=seconds,
@@ -123,15 +165,32 @@ def evaluate_policy(
             contact_agreement=float(t["contact_agree"].sum() / total_alive),
             forward_speed=mean_speed,
             reference_speed=mean_ref,
-            speed_error=error / abs(mean_ref) if abs(mean_ref) > 1e-6 else error,
+            speed_error=_error(mean_speed, mean_ref),
             mean_episode_seconds=float((t["alive_steps"].clamp(min=1) * env.dt).mean()),
             push_max=push_max,
             action_delay_steps=action_delay_steps,
             late_steps=late_steps,
             falls_by_cause={name: int(count.sum()) for name, count in t["causes"].items()},
+            steering=_steering(t, total_alive, dt=env.dt) if steers(clip) else None,
         )
     finally:
         sim.close()
+
+
+def _error(measured: float, reference: float) -> float:
+    """|measured - reference| relative to |reference|, or absolute where the reference is zero."""
+    error = abs(measured - reference)
+    return error / abs(reference) if abs(reference) > _ZERO else error
+
+
+def _steering(t: dict[str, torch.Tensor], total_alive: torch.Tensor, *, dt: float) -> SteeringFigures:
+    lateral, ref_lateral = float(t["lateral"].sum() / total_alive), float(t["ref_lateral"].sum() / total_alive)
+    turn, ref_turn = float(t["turn"].sum() / total_alive / dt), float(t["ref_turn"].sum() / total_alive / dt)
+    return SteeringFigures(
+        lateral_speed=lateral, reference_lateral_speed=ref_lateral, lateral_speed_error=_error(lateral, ref_lateral),
+        yaw_rate=turn, reference_yaw_rate=ref_turn, yaw_rate_error=_error(turn, ref_turn),
+        median_heading_error_deg=float(torch.rad2deg(t["heading_error"]).median()),
+    )
 
 
 def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> tuple[FallRecord, dict[str, torch.Tensor]]:
@@ -139,12 +198,16 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> tuple[FallRecord, di
     its falls and touches, and per world (N,): the terminations its fall met (``causes``, by name), turned (more
     than 90 degrees from its start while up), alive steps (the episode's length), the steps summed over (those after
     which the world was still up), summed squared joint error, share of feet in the reference's contact state,
-    forward and reference speed, and the last absolute heading change while up, rad."""
+    forward and reference speed, and the last absolute heading change while up, rad; and for steering figures the
+    lateral and reference lateral speed, the heading's and the reference's change per step (rad), and the last
+    absolute angle between the two headings while up, rad."""
     n, dev = env.num_envs, env.device
     t = {"turned": torch.zeros(n, dtype=torch.bool, device=dev), "causes": {}}
-    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change")
+    names = ("alive_steps", "summed_steps", "sq_error", "contact_agree", "speed", "ref_speed", "heading_change",
+             "lateral", "ref_lateral", "turn", "ref_turn", "heading_error")
     t |= {k: torch.zeros(n, device=dev) for k in names}
     start_yaw = yaw_of(env.sim_state.root_quat)
+    last = {"yaw": start_yaw, "ref_yaw": yaw_of(env.reference.frame().root_quat)}
 
     def follow(extras: dict, fell: torch.Tensor, ended: torch.Tensor, alive: torch.Tensor) -> None:
         s, ref = env.sim_state, env.reference.frame()
@@ -152,15 +215,27 @@ def _run_episodes(env: ImitationEnv, policy: GaitPolicy) -> tuple[FallRecord, di
             t["causes"][name] = (t["causes"][name] | (fell & met)) if name in t["causes"] else fell & met
         live = alive.float()
         yaw = yaw_of(s.root_quat)
-        change = torch.remainder(yaw - start_yaw + torch.pi, 2 * torch.pi) - torch.pi
+        change = _wrap(yaw - start_yaw)
         t["heading_change"] = torch.where(alive, change.abs(), t["heading_change"])
         t["turned"] |= alive & (change.abs() > torch.pi / 2)
         t["sq_error"] += live * (s.joint_pos - ref.joint_pos).square().mean(-1)
         t["contact_agree"] += live * (s.foot_contact.bool() == ref.contact).float().mean(-1)
         t["speed"] += live * quat_rotate_inverse(quat_from_yaw(yaw), s.root_lin_vel)[:, 0]
         t["ref_speed"] += live * ref.heading_lin_vel[:, 0]
+        t["lateral"] += live * quat_rotate_inverse(quat_from_yaw(yaw), s.root_lin_vel)[:, 1]
+        t["ref_lateral"] += live * ref.heading_lin_vel[:, 1]
+        ref_yaw = yaw_of(ref.root_quat)
+        t["turn"] += live * _wrap(yaw - last["yaw"])
+        t["ref_turn"] += live * _wrap(ref_yaw - last["ref_yaw"])
+        t["heading_error"] = torch.where(alive, _wrap(yaw - ref_yaw).abs(), t["heading_error"])
+        last["yaw"], last["ref_yaw"] = yaw, ref_yaw
         t["summed_steps"] += live
         t["alive_steps"] += live + ended.float()  # the step that ends an episode counts for its length
 
     counted, _ = rollout(env, policy, steps=env.max_episode_length, after=follow)
     return counted, t
+
+
+def _wrap(angle: torch.Tensor) -> torch.Tensor:
+    """``angle`` wrapped into [-pi, pi), rad."""
+    return torch.remainder(angle + torch.pi, 2 * torch.pi) - torch.pi

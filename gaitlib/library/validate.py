@@ -122,6 +122,12 @@ _EVALUATION = record(
         "contact_agreement": _RATE, "push_max": _PUSH_N, "push_force": _PUSH_N, "falls": text(tuple(Falls)),
         "falls_by_cause": table(text(), _COUNT), "seed": _SEED, "command": text(),
         "late_steps": number(0, 10, whole=True),
+        "steering": record({
+            "lateral_speed": number(-20, 20, unit="m/s"), "reference_lateral_speed": number(-20, 20, unit="m/s"),
+            "lateral_speed_error": number(0), "yaw_rate": number(-50, 50, unit="rad/s"),
+            "reference_yaw_rate": number(-50, 50, unit="rad/s"), "yaw_rate_error": number(0),
+            "median_heading_error_deg": number(0, 180, unit="deg"),
+        }),
     },
     extra=plain(),
 )
