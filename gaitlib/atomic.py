@@ -11,6 +11,8 @@ import hashlib
 import json
 import math
 import os
+import shlex
+import sys
 import tempfile
 import time
 from collections.abc import Iterator, Mapping
@@ -21,6 +23,8 @@ from gaitlib.errors import GaitlibError
 __all__ = [
     "CHECKSUM_KEY",
     "atomic_path",
+    "check_unlocked",
+    "command_line",
     "file_sha256",
     "fsync_folder",
     "json_checksum",
@@ -31,6 +35,8 @@ __all__ = [
     "save_figure",
     "stale_temporaries",
     "take_lock",
+    "torch_bytes",
+    "write_bytes",
     "write_json",
 ]
 
@@ -70,11 +76,37 @@ def atomic_path(path: Path, *, durable: bool = False) -> Iterator[Path]:
             with open(tmp, "rb") as handle:
                 os.fsync(handle.fileno())
         os.replace(tmp, path)
+    except OSError as error:  # a full disk: name the file being written, not the temporary (or nothing)
+        tmp.unlink(missing_ok=True)
+        if error.filename not in (None, str(tmp), tmp):
+            raise
+        raise OSError(error.errno, error.strerror, str(path)) from error
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     if durable:
         fsync_folder(path.parent)
+
+
+def torch_bytes(payload: object) -> bytes:
+    """``payload`` as ``torch.save`` writes it, made in memory (then written with :func:`write_bytes`: torch's own
+    file writer fails on a full disk with a multi-line ``RuntimeError`` that names no file)."""
+    import io
+
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    return buffer.getvalue()
+
+
+def write_bytes(path: Path, data: bytes, *, durable: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_path`). Files that a C library would write itself (HDF5,
+    torch) are made in memory and written with this: a full disk then fails Python's own write, one ``OSError``
+    naming ``path``, and leaves no half-closed handle inside the C library (HDF5 crashes at exit on one)."""
+    with atomic_path(path, durable=durable) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
 
 
 def stale_temporaries(path: Path) -> list[Path]:
@@ -190,8 +222,9 @@ def save_figure(fig, path: Path, *, dpi: int = 110) -> Path:
 
 def take_lock(lock: Path, *, writing: str, error: type[Exception]) -> int:
     """Take the exclusive writer lock ``lock`` (a file, created if needed) without waiting, write this process's
-    id into it and return its descriptor; if another process holds it, raise ``error("<writing> is being written
-    by process N")``. The kernel releases the lock when the holder exits, however it exits."""
+    id and command line into it and return its descriptor; if another process holds it, raise ``error("<writing>
+    is being written by process N (its command)")``. The kernel releases the lock when the holder exits, however
+    it exits."""
     lock.parent.mkdir(parents=True, exist_ok=True)
     while True:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
@@ -206,8 +239,23 @@ def take_lock(lock: Path, *, writing: str, error: type[Exception]) -> int:
                 break
         os.close(fd)  # its last holder removed it after we opened it: take the one there now
     os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
+    os.write(fd, f"{os.getpid()}\n{command_line()}\n".encode())
     return fd
+
+
+def check_unlocked(lock: Path, *, writing: str, error: type[Exception]) -> None:
+    """Refuse as :func:`take_lock` would, without taking the lock or creating anything: what a command checks
+    before its work when it takes the lock only at the end (``gaitlib train`` publishing its entry)."""
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except (FileNotFoundError, NotADirectoryError):
+        return  # a held lock's file exists: its holder removes it only when it releases it
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise error(f"{writing} is being written by {_holder(fd)}") from None
+    finally:
+        os.close(fd)
 
 
 def release_lock(lock: Path, fd: int) -> None:
@@ -217,11 +265,27 @@ def release_lock(lock: Path, fd: int) -> None:
 
 
 def _holder(fd: int) -> str:
-    """Who holds the lock open as ``fd`` (it writes its id right after taking it)."""
+    """Who holds the lock open as ``fd``: ``process N (its command line)`` (it writes both right after taking
+    it)."""
+    pid = ""
     for _ in range(20):
-        text = os.pread(fd, 32, 0).decode(errors="replace").strip()
-        if text.isdigit():
-            return f"process {text}"
+        pid, _, command = os.pread(fd, 4096, 0).decode(errors="replace").partition("\n")
+        if pid.isdigit() and command.endswith("\n"):
+            return f"process {pid} ({command.strip()})"
         time.sleep(0.05)
-    return "another process"
+    return f"process {pid}" if pid.isdigit() else "another process"
+
+
+def command_line() -> str:
+    """This process's command line as one line (``gaitlib fit --data t.h5``; the program by its file name), at most
+    300 characters."""
+    try:
+        with open(f"/proc/{os.getpid()}/cmdline", "rb") as handle:
+            argv = [a.decode(errors="replace") for a in handle.read().split(b"\0")[:-1]]
+    except OSError:
+        argv = list(sys.argv)
+    if argv:
+        argv[0] = os.path.basename(argv[0])
+    line = shlex.join(argv).replace("\n", " ")
+    return line if len(line) <= 300 else line[:297] + "..."
 

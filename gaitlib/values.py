@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from gaitlib.errors import GaitlibError
 
-__all__ = ["IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "parse_values"]
+__all__ = ["IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "number_text", "parse_values"]
 
 MAX_MAGNITUDES = 1000
 """Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
@@ -36,7 +36,7 @@ class Bounds:
 
     def describe(self) -> str:
         """The range as the help and the errors write it, e.g. ``[0, 2000] N`` or ``(0, 600] s``."""
-        text = f"{'(' if self.low_open else '['}{_number(self.low)}, {_number(self.high)}]"
+        text = f"{'(' if self.low_open else '['}{number_text(self.low)}, {number_text(self.high)}]"
         return f"{text} {self.unit}" if self.unit else text
 
     def check(self, option: str, value: float | None) -> float | None:
@@ -47,14 +47,15 @@ class Bounds:
         above = number > self.low if self.low_open else number >= self.low
         if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
             kind = "a whole number" if self.whole else "a finite number"
-            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {_number(number)}")
+            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {number_text(number)}")
         return value
 
 
-def _number(value: float) -> str:
-    """``2000``, ``4294967295``, ``0.5``, ``nan``: whole numbers written out, others as ``:g`` writes them."""
+def number_text(value: float) -> str:
+    """``2000``, ``4294967295``, ``0.5``, ``1.0000001``, ``nan``: whole numbers written out, others with every digit
+    they were given (the shortest text that reads back as the same number: ``:g`` would turn 1.0000001 into 1)."""
     value = float(value)
-    return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+    return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else repr(value)
 
 
 IMPULSE_NS = Bounds(low=0, high=200, unit="N s")

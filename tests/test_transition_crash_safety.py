@@ -3,7 +3,7 @@
 Kills are real SIGKILLs of forked children (a fork shares the imported modules and the tiny library, so each costs
 a fraction of a second): a child patches the write primitives the writer uses (``h5py`` dataset creation,
 ``os.fsync``, ``os.replace``, ``Path.unlink``) to kill itself at the N-th call, then collects or appends. One test
-kills inside HDF5's own ``pwrite64`` with ``strace``.
+kills inside the write of a part with ``strace``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from test_transitions import GAITS, HEADER, assert_same, make_file, synthetic
 
+from gaitlib.atomic import command_line
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.meta import TrialProtocol
@@ -148,9 +149,9 @@ def test_a_kill_at_every_step_of_an_append_and_its_merge_keeps_every_committed_s
 
 @pytest.mark.skipif(
     shutil.which("strace") is None,
-    reason="strace is not installed: no kill inside HDF5's own writes (pwrite64) is run, only the pure-Python kills",
+    reason="strace is not installed: no kill inside a part's write(2) is run, only the pure-Python kills",
 )
-def test_a_kill_inside_hdf5s_own_writes_keeps_every_committed_sample(tiny_library, tmp_path) -> None:
+def test_a_kill_inside_the_write_of_a_part_keeps_every_committed_sample(tiny_library, tmp_path) -> None:
     path = tmp_path / "t.h5"
     collect(path, library=tiny_library, gaits=GAITS, config=FAST)
     before = read(path).samples
@@ -161,11 +162,13 @@ def test_a_kill_inside_hdf5s_own_writes_keeps_every_committed_sample(tiny_librar
         f"collect(sys.argv[1], library=Library(sys.argv[2]), gaits={GAITS!r}, "
         "config=dataclasses.replace(CollectConfig(**fields), samples=12))"
     )
-    command = ["strace", "-f", "-qq", "-o", "/dev/null", "-e", "trace=pwrite64",
-               "-e", "inject=pwrite64:signal=SIGKILL:when=10", sys.executable, "-c", script, str(path),
+    # HDF5 makes each part in memory and Python writes it with one write(2): killed there, in the first part's
+    command = ["strace", "-f", "-qq", "-o", "/dev/null", "-e", "trace=write",
+               "-e", "inject=write:signal=SIGKILL:when=1", sys.executable, "-c", script, str(path),
                str(tiny_library.root)]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
-    assert done.returncode == -signal.SIGKILL, done.stderr  # killed in the 10th pwrite64: mid-way through a part
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")  # no other write(2) before the part's
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert done.returncode == -signal.SIGKILL, done.stderr
     assert_same(read(path).samples, before)
     assert collect(path, library=tiny_library, gaits=GAITS, config=dataclasses.replace(FAST, samples=8)).samples == 8
     assert_same(read(path).samples.select(slice(0, 4)), before)
@@ -195,7 +198,7 @@ def test_two_collections_of_one_new_file_one_runs_the_other_says_who_writes(tiny
     (winner,) = set(pids) - {loser}
     assert loser_code == 3 and status(winner) == 0
     message = (tmp_path / f"w{pids.index(loser)}.txt").read_text()
-    assert message == f"{path} is being written by process {winner}"
+    assert message == f"{path} is being written by process {winner} ({command_line()})"  # a fork: pytest's line
     info = validate(path)
     assert info.count == 8 and len(info.sessions) == 1 and leftovers(path) == []
 
@@ -203,10 +206,10 @@ def test_two_collections_of_one_new_file_one_runs_the_other_says_who_writes(tiny
 def test_a_held_lock_is_named_not_called_corrupt_and_readers_go_on(tiny_library, tmp_path) -> None:
     path = make_file(tmp_path / "t.h5", synthetic(3))
     with open_writer(path, header=HEADER) as writer:
-        assert lock_path(path).read_text().strip() == str(os.getpid())
+        assert lock_path(path).read_text().splitlines() == [str(os.getpid()), command_line()]
         with pytest.raises(TransitionDataError, match="is being written by process") as caught:
             collect(path, library=tiny_library, gaits=GAITS, config=FAST)
-        assert str(caught.value) == f"{path} is being written by process {os.getpid()}"
+        assert str(caught.value) == f"{path} is being written by process {os.getpid()} ({command_line()})"
         writer.append(synthetic(2, start=3))
         assert validate(path).count == 5 and len(read(path).samples) == 5
     assert not lock_path(path).exists()

@@ -12,7 +12,7 @@ import pytest
 from cli_runner import gaitlib, gaitlib_quick
 from conftest import copy_library
 
-from gaitlib.atomic import release_lock, take_lock
+from gaitlib.atomic import command_line, release_lock, take_lock
 from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
 from gaitlib.library.layout import shipped_library_dir
@@ -75,8 +75,10 @@ def test_a_second_writer_of_a_library_is_refused_while_one_writes(switching_libr
     with library_writer(library.root, command="gaitlib fit"):
         refused = gaitlib_quick("routes", "--library", str(library.root), "--samples", "2", "--worlds", "2")
         assert refused.returncode == 2 and refused.stderr.count("\n") == 1
-        assert f"library {library.root} (gaitlib routes) is being written by process {os.getpid()}" in refused.stderr
-        with pytest.raises(GaitlibError, match=r"\(gaitlib train\) is being written by process"), library_writer(
+        holder = f"process {os.getpid()} ({command_line()})"
+        assert refused.stderr == (f"gaitlib: error: gaitlib routes refused: library {library.root} is being written "
+                                  f"by {holder}\n")
+        with pytest.raises(GaitlibError, match=r"^gaitlib train refused: .* is being written by process"), library_writer(
             library.root, command="gaitlib train"
         ):
             pass

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import signal
 import sys
 from importlib.metadata import version
@@ -74,14 +75,22 @@ def main() -> None:
             print(f"gaitlib: error: {error}", file=sys.stderr)
         sys.exit(getattr(error, "exit_code", 2))
     except OSError as error:  # a full disk, a read-only folder: nothing already written is lost (atomic writes)
-        where = f" ({error.filename})" if error.filename else ""
-        print(f"gaitlib: error: {error.strerror or error}{where}", file=sys.stderr)
+        print(f"gaitlib: error: {_os_error(error)}", file=sys.stderr)
         sys.exit(1)
     if code == 130:
         print(
             "gaitlib: interrupted; finished work is saved (train: --resume; collect: rerun to resume)", file=sys.stderr
         )
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _os_error(error: OSError) -> str:
+    """One line for an ``OSError``; a full disk says what is kept and how to go on."""
+    where = f" ({error.filename})" if error.filename else ""
+    if error.errno in (errno.ENOSPC, errno.EDQUOT):
+        return (f"no space left on the device writing {error.filename or 'a file'}; every file written before is "
+                "kept whole (writes are atomic): free space and run the command again (train: with --resume)")
+    return f"{error.strerror or error}{where}"
 
 
 def _interrupt(signum: int, frame: object) -> None:

@@ -10,7 +10,6 @@ parallel worlds costs in memory is checked against the machine by :func:`check_w
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import typer
 
@@ -35,7 +34,6 @@ __all__ = [
     "Bounds",
     "OptionError",
     "bounded",
-    "check_out_file",
     "check_worlds",
     "cluster_config",
     "parse_magnitudes",
@@ -204,10 +202,3 @@ def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ..
 def parse_magnitudes(text: str) -> tuple[float, ...]:
     """``--magnitudes``: push magnitudes, N, each in :data:`PUSH_N` (see :func:`parse_values`)."""
     return parse_values(text, option="--magnitudes", bounds=PUSH_N, example="0:500:50")
-
-
-def check_out_file(option: str, path: Path) -> Path:
-    """``path`` if it can name a file to write (not empty, not an existing folder); one line otherwise."""
-    if not str(path).strip() or path.is_dir():
-        raise OptionError(f"{option} must name a file, got '{path}'" + (" (a folder)" if path.is_dir() else ""))
-    return path

@@ -32,11 +32,12 @@ def record_command(
 ) -> None:
     """Record states of every gait before falls and survivals: one shove of 0 to --impulse-max N s per episode,
     a quarter of them unshoved and a quarter switched to another gait first (docs/switching.md, "The guard")."""
-    from gaitlib.cli.options import check_out_file, check_worlds
+    from gaitlib.cli.options import check_worlds
+    from gaitlib.cli.preflight import writable_file
     from gaitlib.collection.survival import SurvivalRecording, record_survival
     from gaitlib.meta import load_switching
 
-    check_out_file("--out", out)
+    writable_file("--out", out)
     check_worlds("--worlds", worlds, backend=backend)
     config = SurvivalRecording(episodes=episodes, num_worlds=worlds, impulse_max_ns=impulse_max, seed=seed,
                                backend=backend, falls=falls)

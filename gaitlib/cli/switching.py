@@ -70,7 +70,8 @@ def run_command(
 ) -> None:
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
     with --strategy (guarded unless --no-guard)."""
-    from gaitlib.cli.options import OptionError, check_out_file
+    from gaitlib.cli.options import OptionError
+    from gaitlib.cli.preflight import needs_module, writable_file
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
     from gaitlib.meta.trace_plot import plot_trace
@@ -79,9 +80,10 @@ def run_command(
     sequence = [g.strip() for g in dests.split(",")]
     if "" in sequence:
         raise OptionError(f"--to takes gait names separated by commas, got '{dests}'")
-    check_out_file("--plot", plot)
+    writable_file("--plot", plot)
     if video is not None:
-        check_out_file("--video", video)
+        writable_file("--video", video)
+        needs_module("--video", ("imageio", "imageio_ffmpeg"), install="pip install 'gaitlib[video]'")
     check_guard(margin=guard_margin)
     setup = load_switching(library)
     guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)
@@ -219,7 +221,10 @@ def benchmark_command(
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
+    from gaitlib.cli.preflight import writable_folder
+
     cluster = cluster_config(ray, address, workers)
+    writable_folder("--out", out)
     gap = DeploymentGap(robot=robot and str(robot), action_delay=action_delay, motor_strength=motor_strength)
     if gap.needs_mujoco:
         backend = gap.backend_name(backend)  # auto: mujoco; newton: refused in one line
@@ -298,13 +303,19 @@ def routes_command(
     from gaitlib.benchmark.routes import routes_from_results
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds
-    from gaitlib.library.target import check_writable, copy_library, library_writer, measurement_id, writing_target
+    from gaitlib.cli.preflight import writable_folder
+    from gaitlib.library.target import check_library, check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import measurement_id
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
     check_worlds("--worlds", worlds, backend=backend)
+    if out is not None:
+        writable_folder("--out", out)
     target, copy_from = writing_target(library)
+    writable_folder("--library", target, what="a library folder")
     check_writable(target, replace=replace, command="gaitlib routes", what="the route table")
+    check_library(copy_from or target, command="gaitlib routes")
     setup = load_switching(copy_from or target)
     get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work
     if copy_from is not None:

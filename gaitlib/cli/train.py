@@ -40,6 +40,7 @@ def _description(gait: str, gait_file: Path | None):
 
 
 def train_command(
+    ctx: typer.Context,
     gait: str = typer.Argument(
         ..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."
     ),
@@ -132,6 +133,10 @@ def train_command(
     from gaitlib.training.target import check_target
     from gaitlib.training.trainer import TrainRequest, resume_point, train_gait
 
+    from gaitlib.cli.preflight import no_effect, writable_folder
+
+    no_effect(ctx, ("kick_max", "kick_draw", "kick_interval"), when=push_kind == "force",
+              because="with --push-kind force (its pushes are forces, not kicks)")
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
     description = _description(gait, gait_file)
     recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_draw=kick_draw,
@@ -140,6 +145,8 @@ def train_command(
                     cycle_sync=cycle_sync)
     chosen = recipe.preset(get_preset(preset))
     target, copy_from = writing_target(library)
+    writable_folder("--library", target, what="a library folder")
+    writable_folder("--run-dir", run_dir or Path("runs") / gait)
     plan = check_target(target, gait, preset=chosen.name, replace=replace, copy_from=copy_from, states=states)
     request = TrainRequest(
         description=description,
@@ -251,6 +258,7 @@ def _say_status(console, library: Path, gait: str) -> None:
 
 
 def eval_command(
+    ctx: typer.Context,
     gait: str = typer.Argument(..., help="Library entry to evaluate."),
     episodes: int = bounded(256, "--episodes", help="Episodes (one world each);", bounds=WORLDS),
     seconds: float = bounded(20.0, "--seconds", help="Episode length;", bounds=EPISODE_SECONDS),
@@ -287,13 +295,20 @@ def eval_command(
     """Evaluate a library policy under paper Table 1 randomization: falls, leg touches, heading held, tracking
     errors; or, with --impulses, its fall rate against a single push's impulse (with --guard, guarded and not)."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
-    from gaitlib.envs import EnvConfig
-    from gaitlib.evaluation import evaluate_policy
+    from gaitlib.cli.preflight import no_effect, writable_file, writable_folder
     from gaitlib.library import Library
 
+    no_effect(ctx, ("replace",), when=not record, because="without --record (nothing is written)")
+    no_effect(ctx, ("plot",), when=impulses is None, because="without --impulses (the push curve is what it plots)")
+    no_effect(ctx, ("seconds", "push_max", "action_delay", "late"), when=impulses is not None,
+              because="with --impulses (each episode is the push curve's: one 0.1 s push, the trained delay)")
+    no_effect(ctx, ("record",), when=impulses is not None,
+              because="with --impulses (it stores the quality-bar evaluation, not a push curve)")
     check_worlds("--episodes", episodes, backend=backend)
     values = None if impulses is None else parse_values(impulses, option="--impulses", bounds=IMPULSE_NS,
                                                         example="0:30:3")
+    if plot is not None:
+        writable_file("--plot", plot)
     if guard or guard_margin is not None:
         from gaitlib.cli.survival import guarded_curve
 
@@ -301,23 +316,38 @@ def eval_command(
                       push_max=push_max, other=action_delay is not None or late > 0, backend=backend, seed=seed,
                       plot=plot, as_json=as_json, falls=falls)
         return
-    if record:  # into the library a writing command writes (gaitlib.library.target), the shipped one on purpose only
-        from gaitlib.cli.options import OptionError
-        from gaitlib.library.target import check_writable, copy_library, writing_target
-
-        if values is not None:
-            raise OptionError("--record stores the quality-bar evaluation; it does not take --impulses")
-        library, copy_from = writing_target(library)
-        check_writable(library, replace=replace, command="gaitlib eval --record", what=f"the entry {gait}")
-        Library(copy_from or library).entry(gait)  # an unknown gait: one line, before the copy
-        if copy_from is not None:
-            copy_library(copy_from, library)
-    lib = Library(library)
-    entry = lib.entry(gait)
     if values is not None:
-        _push_curve(entry, lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot, as_json=as_json,
-                    falls=falls)
+        lib = Library(library)
+        _push_curve(lib.entry(gait), lib, values, episodes=episodes, backend=backend, seed=seed, plot=plot,
+                    as_json=as_json, falls=falls)
         return
+    if not record:
+        _evaluate(Library(library), gait, episodes=episodes, seconds=seconds, backend=backend, seed=seed,
+                  push_max=push_max, action_delay=action_delay, late=late, falls=falls, as_json=as_json)
+        return
+    # --record: into the library a writing command writes (gaitlib.library.target), a protected one on purpose only,
+    # its writer lock held from before the evaluation (a second writer is refused before, not after, the work)
+    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+
+    library, copy_from = writing_target(library)
+    writable_folder("--library", library, what="a library folder")
+    check_writable(library, replace=replace, command="gaitlib eval --record", what=f"the entry {gait}")
+    Library(copy_from or library).entry(gait)  # an unknown gait: one line, before the copy
+    if copy_from is not None:
+        copy_library(copy_from, library)
+    with library_writer(library, command="gaitlib eval --record"):
+        _evaluate(Library(library), gait, episodes=episodes, seconds=seconds, backend=backend, seed=seed,
+                  push_max=push_max, action_delay=action_delay, late=late, falls=falls, as_json=as_json, record=True)
+
+
+def _evaluate(lib, gait: str, *, episodes: int, seconds: float, backend: str, seed: int, push_max: float,
+              action_delay: int | None, late: int, falls: str, as_json: bool, record: bool = False) -> None:
+    """``gaitlib eval GAIT`` without ``--impulses``: evaluate, store it as the entry's own with ``record`` (the
+    caller holds the library's writer lock), and print it."""
+    from gaitlib.envs import EnvConfig
+    from gaitlib.evaluation import evaluate_policy
+
+    entry = lib.entry(gait)
     result = evaluate_policy(
         entry.policy,
         entry.clip,
@@ -332,14 +362,14 @@ def eval_command(
         seed=seed,
     )
     if record:
-        command = (f"gaitlib eval {gait} --episodes {episodes} --seconds {seconds:g} --push-max {push_max:g} --seed "
+        from gaitlib.values import number_text
+
+        command = (f"gaitlib eval {gait} --episodes {episodes} --seconds {number_text(seconds)} --push-max "
+                   f"{number_text(push_max)} --seed "
                    f"{seed} --backend {backend} --falls {falls}"
                    + ("" if action_delay is None else f" --action-delay {action_delay}")
                    + (f" --late {late}" if late else ""))
-        from gaitlib.library.target import library_writer
-
-        with library_writer(lib.root, command="gaitlib eval --record"):
-            lib.record_evaluation(gait, result.as_dict() | {"seed": seed, "command": command})
+        lib.record_evaluation(gait, result.as_dict() | {"seed": seed, "command": command})
     if as_json:
         print(json_text({"gait": gait} | result.as_dict()))
         return

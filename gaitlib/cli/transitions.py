@@ -70,7 +70,8 @@ def collect_command(
     from rich.console import Console
     from rich.markup import escape
 
-    from gaitlib.cli.options import check_out_file, check_worlds, cluster_config, parse_pairs
+    from gaitlib.cli.options import check_worlds, cluster_config, parse_pairs
+    from gaitlib.cli.preflight import writable_file
     from gaitlib.cli.progress import job_progress
     from gaitlib.collection import CollectConfig, collect
     from gaitlib.library import Library
@@ -78,7 +79,7 @@ def collect_command(
 
     cluster = cluster_config(ray, address, workers)
     check_worlds("--worlds", worlds, backend=backend)
-    check_out_file("--out", out)
+    writable_file("--out", out)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
     drawn = False
@@ -162,10 +163,12 @@ def states_command(
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
+    from gaitlib.cli.preflight import writable_file
     from gaitlib.cli.progress import job_progress
     from gaitlib.library import Library
     from gaitlib.transitions.states import StatesConfig, record_states
 
+    writable_file("--out", out)
     check_worlds("--worlds", worlds, backend=backend)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
@@ -191,6 +194,7 @@ def _duration(seconds: float) -> str:
 
 
 def fit_command(
+    ctx: typer.Context,
     data: list[Path] = typer.Option(
         [Path("data/transitions.h5")], "--data", help="HDF5 transition samples; repeat to fit on several files."
     ),
@@ -214,19 +218,24 @@ def fit_command(
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
+    from gaitlib.cli.preflight import no_effect, writable_folder
     from gaitlib.library import Library
-    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import check_library, check_writable, copy_library, library_writer, writing_target
     from gaitlib.strategies.fitting import check_validatable, evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 
+    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label"), when=evaluate,
+              because="with --evaluate (it scores the library's net and fits nothing)")
     if evaluate:
         lib = Library(library)
         samples = read_all(data, current=lib.identities())
         _report(evaluate_library(lib, samples, sources=data, falls=falls), as_json)
         return
     target, copy_from = writing_target(library)
+    writable_folder("--library", target, what="a library folder")
     check_writable(target, replace=replace, command="gaitlib fit", what="the switching models")
+    check_library(copy_from or target, command="gaitlib fit")
     samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
     check_validatable(samples, falls=falls, min_per_label=min_per_label)  # too few to validate: refused here too
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
@@ -285,8 +294,10 @@ def map_command(
     from gaitlib.cli.tables import print_measures, table_console
     from gaitlib.transitions import read
 
+    from gaitlib.cli.preflight import writable_folder
+
+    out = writable_folder("--out", out if out is not None else data.with_name(data.stem + "-map"))
     samples = read(data)
-    out = out if out is not None else data.with_name(data.stem + "-map")
     maps = transition_maps(samples, bins=bins, falls=falls)
     out.mkdir(parents=True, exist_ok=True)
     write_map_json(maps, out / "map.json", source=str(data), falls=falls)

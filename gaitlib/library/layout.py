@@ -5,6 +5,7 @@ library's policies. No heavy imports: everything that names a library's gaits or
 from __future__ import annotations
 
 import os
+import subprocess
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -16,8 +17,10 @@ __all__ = [
     "default_library_dir",
     "first_fit",
     "gait_order",
+    "SHIPPED_MARKER",
     "is_shipped",
     "ordered_pairs",
+    "protection",
     "shipped_library_dir",
 ]
 
@@ -53,6 +56,31 @@ def is_shipped(root: Path | str) -> bool:
         return Path(root).resolve() == shipped_library_dir().resolve()
     except OSError:
         return False
+
+
+SHIPPED_MARKER = ".gaitlib-shipped"
+"""A file at a library's root that marks it as shipped data (its content is free text): such a library is written
+only with ``--replace``, wherever it lies and whatever its folder's name. Copies made by gaitlib leave it out (a
+user's own library is never marked)."""
+
+
+def protection(root: Path | str) -> str | None:
+    """Why the library ``root`` is written only with ``--replace``, ``None`` if it is not protected: the shipped
+    library, one marked as shipped (:data:`SHIPPED_MARKER`), or one with a file tracked by git in the checkout it
+    lives in (``library-paper/``, ``library-switch-start/``: committed results)."""
+    root = Path(root)
+    if is_shipped(root):
+        return "the shipped library"
+    if (root / SHIPPED_MARKER).is_file():
+        return f"marked as shipped ({SHIPPED_MARKER})"
+    if not root.is_dir():
+        return None
+    try:
+        tracked = subprocess.run(["git", "-C", str(root), "ls-files", "--", "."], capture_output=True, text=True,
+                                 timeout=30, check=False)
+    except (OSError, subprocess.SubprocessError):  # no git: only the marker protects
+        return None
+    return "committed to git" if tracked.returncode == 0 and tracked.stdout.strip() else None
 
 
 def gait_order(names: Iterable[str]) -> tuple[str, ...]:

@@ -71,6 +71,13 @@ def staged_folder(final: Path) -> Iterator[Path]:
             yield staging
             _fsync_tree(staging)
             _swap_in(staging, final)
+        except OSError as error:  # a full disk: name the file of the folder being published, not the staging one
+            shutil.rmtree(staging, ignore_errors=True)
+            if error.filename is None:  # a write to an open file: the folder is what was being written
+                raise OSError(error.errno, error.strerror, str(final)) from error
+            if not Path(error.filename).is_relative_to(staging):
+                raise
+            raise OSError(error.errno, error.strerror, str(final / Path(error.filename).relative_to(staging))) from error
         except BaseException:
             shutil.rmtree(staging, ignore_errors=True)
             raise

@@ -22,7 +22,7 @@ import numpy as np
 
 from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import first_fit, is_shipped, ordered_pairs
+from gaitlib.library.layout import first_fit, is_shipped, ordered_pairs, protection
 from gaitlib.library.store import Library
 
 __all__ = ["Bundle", "GaitStatus", "LibraryStatus", "Problem", "library_status", "read_bundle"]
@@ -255,7 +255,7 @@ def _command(*words: object) -> str:
 
 
 def _train(gait: str, root: Path) -> str:
-    return _command("gaitlib", "train", gait, "--library", root, *(["--replace"] if is_shipped(root) else []))
+    return _command("gaitlib", "train", gait, "--library", root, *(["--replace"] if protection(root) else []))
 
 
 def _collect_all(root: Path, gaits: Sequence[str]) -> tuple[str, ...]:

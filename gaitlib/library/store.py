@@ -33,7 +33,7 @@ from pathlib import Path
 
 import torch
 
-from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, read_json, write_json
+from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, read_json, torch_bytes, write_json
 from gaitlib.checks import Invalid
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
@@ -272,7 +272,7 @@ class Library:
         self._entries.pop(description.name, None)
         with staged_folder(self.root / description.name) as staging:
             weights = staging / "policy.pt"
-            torch.save({"actor": actor.state_dict(), "critic": critic.state_dict()}, weights)
+            weights.write_bytes(torch_bytes({"actor": actor.state_dict(), "critic": critic.state_dict()}))
             export_onnx(actor, staging / "policy.onnx")
             metadata = {
                 "format_version": FORMAT_VERSION,

@@ -7,8 +7,9 @@ over what they ship: a run writes its own output, and the user chooses what to u
 - A writing command writes into the library ``--library`` names; without it into ``$GAITLIB_LIBRARY``; without
   that into the user's own library, :data:`USER_LIBRARY`, made on its first write as a copy of the shipped one
   (entries and switching models, published in one step).
-- The shipped library is written only on purpose (``--replace``); otherwise the command is refused in one line
-  before any work.
+- A protected library (the shipped one, one marked as shipped, or one committed to git, such as
+  ``library-paper/``: :func:`~gaitlib.library.layout.protection`) is written only on purpose (``--replace``);
+  otherwise the command is refused in one line before any work.
 - Two writers of one library exclude each other (:func:`library_writer`): the second is refused in one line, and a
   reader sees the old files or the new ones, whole.
 """
@@ -23,15 +24,16 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
-from gaitlib.atomic import release_lock, take_lock
+from gaitlib.atomic import check_unlocked, release_lock, take_lock
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import is_shipped, shipped_library_dir
+from gaitlib.library.layout import protection, shipped_library_dir
 from gaitlib.library.publish import staged_folder
 from gaitlib.library.store import Library
 
 __all__ = [
     "USER_LIBRARY",
     "WRITER_LOCK",
+    "check_library",
     "check_writable",
     "copy_library",
     "library_writer",
@@ -58,12 +60,28 @@ def writing_target(library: Path | None) -> tuple[Path, Path | None]:
 
 
 def check_writable(library: Path, *, replace: bool, command: str, what: str) -> None:
-    """Refuse, in one line, ``command`` writing ``what`` into the shipped library without ``replace``."""
-    if is_shipped(library) and not replace:
+    """Refuse, in one line, ``command`` writing ``what`` into a protected library (the shipped one, one marked as
+    shipped or committed to git: :func:`~gaitlib.library.layout.protection`) without ``replace``, and a writer
+    while another holds the library's lock (checked, not taken: nothing is created)."""
+    why = protection(library)
+    if why is not None and not replace:
+        shipped = "the shipped library" if why == "the shipped library" else f"a protected library ({why})"
         raise GaitlibError(
-            f"{command} would rewrite {what} of the shipped library ({library}); it writes to your own library by "
-            f"default ({USER_LIBRARY}, a copy of the shipped one, or $GAITLIB_LIBRARY), or pass --replace to "
-            "rewrite the shipped one on purpose"
+            f"{command} would rewrite {what} of {shipped}, {library}; it writes to your own library by default "
+            f"({USER_LIBRARY}, a copy of the shipped one, or $GAITLIB_LIBRARY), or pass --replace to rewrite this "
+            "one on purpose"
+        )
+    check_unlocked(Path(library) / WRITER_LOCK, writing=_writing(library, command), error=GaitlibError)
+
+
+def check_library(library: Path, *, command: str) -> None:
+    """Refuse, in one line naming the folder, ``command`` writing into a folder that holds no gait entry (not a
+    library, or an empty one): what it writes needs a library's policies."""
+    if not Library(library).gaits():
+        state = "does not exist" if not Path(library).exists() else "holds no gait entry"
+        raise GaitlibError(
+            f"{command}: {library} is not a library ({state}); give --library a folder of trained gaits, or leave "
+            f"it out to write into your own library ({USER_LIBRARY})"
         )
 
 
@@ -86,11 +104,16 @@ def library_writer(library: Path, *, command: str) -> Iterator[None]:
     publishing, ``eval --record``) is refused in one line while one runs; the kernel frees the lock however the
     holder ends."""
     lock = Path(library) / WRITER_LOCK  # take_lock makes the folder of a library's first write
-    fd = take_lock(lock, writing=f"library {library} ({command})", error=GaitlibError)
+    fd = take_lock(lock, writing=_writing(library, command), error=GaitlibError)
     try:
         yield
     finally:
         release_lock(lock, fd)
+
+
+def _writing(library: Path, command: str) -> str:
+    """What a refused writer's line starts with: the refused command and the library (the holder follows)."""
+    return f"{command} refused: library {library}"
 
 
 def measurement_id(library: Library) -> str:

@@ -7,7 +7,8 @@ never write over what they ship: a run writes its own output, and the user choos
   command that writes a library), made on its first write as a copy of the shipped library (entries and switching
   models), so that a retrained gait joins gaits it can switch with at once and only its own pairs need new
   transition data.
-- The shipped library's entries are replaced only on purpose (``--replace``).
+- A protected library (the shipped one, one marked as shipped, one committed to git) is written only on purpose
+  (``--replace``), a new gait included; a library another process writes is refused before training starts.
 - The tests' preset (``tiny``: it learns nothing) writes only into a library whose every entry it trained.
 - Replacing an entry of any other library is allowed, and said: before training starts, which pairs of its
   switching models the new policy leaves stale (``gaitlib library`` then prints the commands that fix them).
@@ -20,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import is_shipped, ordered_pairs
+from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
-from gaitlib.library.target import USER_LIBRARY
+from gaitlib.library.target import check_writable
 
 __all__ = ["TEST_PRESET", "TrainTarget", "check_target"]
 
@@ -44,17 +45,13 @@ class TrainTarget:
 
 def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_from: Path | None = None,
                  states: Path | None = None) -> TrainTarget:
-    """Refuse, before any work, a run that would replace a shipped entry without ``replace`` or put the tests'
-    preset among trained gaits; otherwise say which switching pairs the new entry will leave stale, and, when the
+    """Refuse, before any work, a run that would write a protected library without ``replace``, write a library
+    another process writes now, or put the tests' preset among trained gaits; otherwise say which switching pairs the new entry will leave stale, and, when the
     handover ``states`` were recorded with other policies than the library's, whose they are."""
     lib = Library(copy_from if copy_from is not None else library)
     names = lib.gaits()
-    if is_shipped(lib.root) and copy_from is None and gait in names and not replace:
-        raise GaitlibError(
-            f"{lib.root / gait} is part of the shipped library, whose switching models depend on it; gaitlib train "
-            f"writes to your own library by default ({USER_LIBRARY}, a copy of the shipped one), or pass --replace "
-            "to replace the shipped entry on purpose"
-        )
+    if copy_from is None:  # a protected library only with --replace; no other writer of it now
+        check_writable(library, replace=replace, command="gaitlib train", what=f"the entry {gait}")
     if preset == TEST_PRESET:
         trained = [n for n in names if n != gait and _preset(lib, n) != TEST_PRESET]
         if trained or (gait in names and _preset(lib, gait) != TEST_PRESET):

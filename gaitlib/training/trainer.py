@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 from rsl_rl.runners import OnPolicyRunner
 
-from gaitlib.atomic import atomic_path, release_lock, take_lock
+from gaitlib.atomic import release_lock, take_lock, torch_bytes, write_bytes
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.errors import GaitlibError
@@ -140,8 +140,7 @@ class GaitRunner(OnPolicyRunner):
     def save(self, path: str, infos: dict | None = None) -> None:
         """rsl-rl's checkpoint layout, written atomically: a failed write leaves the old file as it was."""
         state = self.alg.save() | {"iter": self.current_learning_iteration, "infos": infos}
-        with atomic_path(Path(path)) as tmp:
-            torch.save(state, tmp)
+        write_bytes(Path(path), torch_bytes(state))
 
     def checkpoint(self, name: str = "latest.pt") -> None:
         """Save the run under ``checkpoints/name`` with its record: its identity

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import torch_bytes, write_bytes
 from gaitlib.errors import TransitionDataError
 from gaitlib.library.layout import check_identities
 from gaitlib.transition_net.features import FeatureSpec
@@ -76,8 +76,7 @@ def save_net(path: Path, result: FitResult) -> Path:
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     metadata = json.loads(json.dumps(metadata))  # plain lists and dicts only: loadable with weights_only=True
-    with atomic_path(path) as tmp:
-        torch.save({"metadata": metadata, "state_dict": net.state_dict()}, tmp)
+    write_bytes(path, torch_bytes({"metadata": metadata, "state_dict": net.state_dict()}))
     return path
 
 

@@ -18,7 +18,9 @@ committed samples); ``created_by`` (JSON versions); ``created`` (UTC ISO time); 
 ``index_sha256`` (SHA-256 of the other attributes as stored and of the part list, checked by every reader).
 Index dataset ``parts`` (rows in sample order): ``file`` (name in ``PATH.parts``), ``rows``, ``sha256`` (of the
 part file's bytes). Readers use the listed parts only; part files that are not listed and temporaries (left by a
-killed writer) are ignored, and removed by the next writer (:mod:`gaitlib.transitions.writer`).
+killed writer) are ignored, and removed by the next writer (:mod:`gaitlib.transitions.writer`). Parts and
+index are made by HDF5 in memory and written by Python (:func:`gaitlib.atomic.write_bytes`): a full disk fails one
+``OSError`` naming the file, and HDF5 never holds a file whose writes failed (it crashes at exit on one).
 
 Version 1 (one HDF5 file appended in place, the ``count`` attribute committed last) is read, never appended to.
 """
@@ -35,7 +37,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from gaitlib.atomic import atomic_path, file_sha256, fsync_folder
+from gaitlib.atomic import fsync_folder, write_bytes
 from gaitlib.errors import TransitionDataError
 from gaitlib.transitions.explicit import EXPLICIT_DIM, EXPLICIT_LAYOUT
 from gaitlib.transitions.records import (
@@ -123,21 +125,22 @@ def write_part(path: Path, batch: TransitionBatch, *, start: int) -> Part:
         folder.mkdir()
         fsync_folder(folder.parent)
     name = f"part-{start:012d}-{start + len(batch):012d}.h5"
-    with atomic_path(folder / name, durable=True) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["schema"] = _PART_SCHEMA
-            for column_name, values in batch.columns().items():
-                column = COLUMNS[column_name]
-                row_bytes = values.itemsize * int(np.prod(values.shape[1:]))
-                rows = int(np.clip(2**18 // row_bytes, 64, 4096))
-                ds = f.create_dataset(
-                    column_name, data=values, chunks=(min(rows, len(values)), *values.shape[1:]),
-                    compression="gzip", compression_opts=4, shuffle=True, fletcher32=True,
-                )
-                ds.attrs["description"] = column.description
-                ds.attrs["units"] = column.units
-        digest = file_sha256(tmp)
-    return Part(name, len(batch), digest)
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        f.attrs["schema"] = _PART_SCHEMA
+        for column_name, values in batch.columns().items():
+            column = COLUMNS[column_name]
+            row_bytes = values.itemsize * int(np.prod(values.shape[1:]))
+            rows = int(np.clip(2**18 // row_bytes, 64, 4096))
+            ds = f.create_dataset(
+                column_name, data=values, chunks=(min(rows, len(values)), *values.shape[1:]),
+                compression="gzip", compression_opts=4, shuffle=True, fletcher32=True,
+            )
+            ds.attrs["description"] = column.description
+            ds.attrs["units"] = column.units
+    data = buffer.getvalue()
+    write_bytes(folder / name, data, durable=True)
+    return Part(name, len(batch), hashlib.sha256(data).hexdigest())
 
 
 def write_index(path: Path, index: TransitionIndex) -> None:
@@ -155,7 +158,8 @@ def write_index(path: Path, index: TransitionIndex) -> None:
         "created": index.provenance["created"],
         "count": sum(p.rows for p in index.parts),
     }
-    with atomic_path(path, durable=True) as tmp, h5py.File(tmp, "w") as f:
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
         f.attrs["schema"] = SCHEMA_NAME
         f.attrs["schema_version"] = SCHEMA_VERSION
         for name, value in attrs.items():
@@ -163,6 +167,7 @@ def write_index(path: Path, index: TransitionIndex) -> None:
         f.attrs["index_sha256"] = _index_digest(attrs, index.parts)
         table = np.array([(p.file, p.rows, p.sha256) for p in index.parts], dtype=_PART_DTYPE)
         f.create_dataset("parts", data=table, maxshape=(None,))
+    write_bytes(path, buffer.getvalue(), durable=True)
 
 
 def scan(path: Path, *, keep: tuple[str, ...] = ()) -> tuple[TransitionIndex, dict[str, np.ndarray]]:

@@ -93,9 +93,10 @@ class TransitionWriter:
                 try:
                     self._commit((*self._index.parts, schema.write_part(self.path, batch, start=self.count)))
                     self._merge()
-                except RuntimeError as error:  # HDF5's own write errors (a full disk among them) come as these
+                except OSError as error:  # a full disk, a folder gone read-only
+                    reason = (error.strerror or str(error)).lower()
                     raise TransitionDataError(
-                        f"could not write {self.path} ({str(error).splitlines()[0]}); the {self.count:,} samples "
+                        f"could not write {error.filename or self.path}: {reason}; the {self.count:,} samples "
                         "committed before are kept: free space and rerun to resume"
                     ) from None
         return self.count

@@ -1,0 +1,85 @@
+"""What every command checks before its first simulated step: the options it was given that contradict each other,
+every path it will write, every optional package it will need and every lock it will take.
+
+A refusal is one line, ``gaitlib: error: ...`` with exit code 2, and nothing is created or written: a command that
+would fail at its end (a plot into a folder that cannot be made, a video without imageio, a library that is a
+file, a library another process writes) fails before its work instead (``docs/failures.md``, "Bad input").
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+import typer
+
+from gaitlib.cli.options import OptionError
+
+__all__ = ["given", "needs_module", "no_effect", "writable_file", "writable_folder"]
+
+
+def given(ctx: typer.Context, name: str) -> bool:
+    """Whether the parameter ``name`` (its Python name, ``kick_max``) of the command running in ``ctx`` was given on
+    the command line (or by the environment), not left at its default."""
+    source = ctx.get_parameter_source(name)
+    return source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP")
+
+
+def _flag(ctx: typer.Context, name: str) -> str:
+    """The option's own spelling (``--kick-max``) of the parameter ``name``."""
+    return next(param.opts[0] for param in ctx.command.params if param.name == name)
+
+
+def no_effect(ctx: typer.Context, names: Iterable[str], *, when: bool, because: str) -> None:
+    """Refuse the options ``names`` (parameter names) given to the command running in ``ctx`` although, ``when``
+    this holds, they change nothing (``because`` says why, e.g. ``with --push-kind force (its pushes are forces, not
+    kicks)``): a run records the options it ran with, and one it ignored would be recorded as if it had run."""
+    if not when:
+        return
+    flags = [_flag(ctx, name) for name in names if given(ctx, name)]
+    if flags:
+        them = "it" if len(flags) == 1 else "them"
+        raise OptionError(f"{', '.join(flags)} {'has' if len(flags) == 1 else 'have'} no effect {because}: "
+                          f"leave {them} out")
+
+
+def writable_file(option: str, path: Path) -> Path:
+    """``path`` if a file can be written there: a name that is not empty and not a folder, in a folder that exists
+    and can be written, or can be made (its nearest existing parent a writable folder); one line otherwise. Nothing
+    is created."""
+    if not str(path).strip() or path.is_dir():
+        raise OptionError(f"{option} must name a file, got '{path}'" + (" (a folder)" if path.is_dir() else ""))
+    _creatable(option, path.parent if str(path.parent) else Path("."), of=path)
+    return path
+
+
+def writable_folder(option: str, path: Path, *, what: str = "a folder") -> Path:
+    """``path`` if it is a writable folder, or one that can be made; one line naming ``what`` otherwise (``--library
+    x`` that is a file: ``--library x is a file, not a library folder``). Nothing is created."""
+    if path.exists() and not path.is_dir():
+        raise OptionError(f"{option} {path} is a file, not {what}")
+    _creatable(option, path, of=path)
+    return path
+
+
+def _creatable(option: str, folder: Path, *, of: Path) -> None:
+    """Refuse ``option`` (which writes ``of``) when ``folder`` cannot be made or written: a file on its way, or its
+    nearest existing folder not writable."""
+    existing = Path(os.path.abspath(folder))
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OptionError(f"{option} {of} cannot be written: {existing} is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise OptionError(f"{option} {of} cannot be written: the folder {existing} is not writable")
+
+
+def needs_module(option: str, modules: Iterable[str], *, install: str) -> None:
+    """Refuse ``option`` when one of the optional packages ``modules`` it needs is not installed (``install``: the
+    command that installs them)."""
+    missing = [name for name in modules if importlib.util.find_spec(name) is None]
+    if missing:
+        raise OptionError(f"{option} needs {' and '.join(missing)}, which {'is' if len(missing) == 1 else 'are'} not "
+                          f"installed: {install}")
