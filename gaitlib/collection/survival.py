@@ -21,6 +21,7 @@ at most the batch under way.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 from collections.abc import Callable
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gaitlib.atomic import atomic_path
+from gaitlib.atomic import write_bytes
 from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PushConfig
@@ -205,10 +206,12 @@ def _states(env, policies, scorer, candidates, ids: torch.Tensor, obs, step: int
 def _write(path: Path, header: dict, data: dict[str, np.ndarray]) -> None:
     import h5py
 
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+    buffer = io.BytesIO()  # made in memory, written by Python: a full disk is one OSError, HDF5 holds no failed file
+    with h5py.File(buffer, "w") as f:
         f.attrs["header"] = json.dumps(header)
         for name in _COLUMNS:
             f.create_dataset(name, data=data[name], compression="gzip", compression_opts=1)
+    write_bytes(path, buffer.getvalue())
 
 
 def _read(path: Path) -> tuple[dict, dict[str, np.ndarray]]:

@@ -28,7 +28,7 @@ from gaitlib.atomic import read_json, stale_temporaries, write_json
 from gaitlib.checks import GAIT_NAME, SHA256, check_content, items, number, record, table, text
 from gaitlib.defaults import Falls
 from gaitlib.errors import GaitlibError
-from gaitlib.library.layout import is_shipped, ordered_pairs
+from gaitlib.library.layout import ordered_pairs, protection
 from gaitlib.library.store import Library
 from gaitlib.stats import wilson_interval
 
@@ -176,7 +176,7 @@ def _measure_again(library: Library, saved: Mapping) -> str:
     words = ["gaitlib", "routes", "--library", library.root, "--strategy", saved["strategy"], "--push",
              f"{saved['push_n']:g}", "--max-legs", saved["max_legs"], "--samples", measured["samples"], "--worlds",
              measured["num_worlds"], "--seed", measured["seed"], "--falls", Falls(measured.get("falls", Falls.CONTACT))]
-    if is_shipped(library.root):
+    if protection(library.root):
         words.append("--replace")
     return " ".join(shlex.quote(str(w)) for w in words)
 

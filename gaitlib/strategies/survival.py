@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gaitlib.atomic import atomic_path, file_sha256
+from gaitlib.atomic import file_sha256, torch_bytes, write_bytes
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.library.layout import check_identities, is_shipped
 from gaitlib.library.store import Library
@@ -272,8 +272,7 @@ def save_survival(library: Library, estimate: SurvivalEstimate, *, data: Path) -
         "platt": {estimate.gaits[k]: list(ab) for k, ab in estimate.platt.items()}, "info": estimate.info,
         "data": {"path": str(data), "sha256": file_sha256(data)},
     }
-    with atomic_path(path) as tmp:
-        torch.save({"metadata": metadata, "state_dict": estimate.net.state_dict()}, tmp)
+    write_bytes(path, torch_bytes({"metadata": metadata, "state_dict": estimate.net.state_dict()}))
     return path
 
 
