@@ -69,7 +69,8 @@ def test_fit_on_a_full_disk_leaves_the_models_as_they_were_in_one_line(switching
 cp -r {switching_library} "$DISK/library"
 before=$(cat "$DISK"/library/switching/* | sha256sum)
 fill_but 24
-eval "$CLI" fit --library "$DISK/library" --data {switching_library.parent / 'samples.h5'} --epochs 1
+eval "$CLI" fit --library "$DISK/library" --data {switching_library.parent / 'samples.h5'} --epochs 1 \\
+    --min-per-label 0
 echo "status $?"
 [ "$before" = "$(cat "$DISK"/library/switching/* | sha256sum)" ] && echo unchanged
 ls -a "$DISK/library"

@@ -51,7 +51,7 @@ def writable_file(option: str, path: Path) -> Path:
     is created."""
     if not str(path).strip() or path.is_dir():
         raise OptionError(f"{option} must name a file, got '{path}'" + (" (a folder)" if path.is_dir() else ""))
-    _creatable(option, path.parent if str(path.parent) else Path("."), of=path)
+    _creatable(option, path.parent, of=path)
     return path
 
 
