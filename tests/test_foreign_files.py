@@ -98,7 +98,8 @@ def test_a_failing_disk_during_collect_is_one_line_and_keeps_the_committed_sampl
         return real(*args, **kwargs)
 
     monkeypatch.setattr(schema, "write_part", full_after_one)
-    with pytest.raises(TransitionDataError, match=r"could not write .*t.h5: no space left on device; the 8 samples committed before"):
+    full = r"could not write .*t.h5: no space left on device; the 8 samples committed before"
+    with pytest.raises(TransitionDataError, match=full):
         collect(path, library=tiny_library, gaits=GAITS, config=dataclasses.replace(QUICK, samples=16))
     assert validate(path).count == 8
 

@@ -55,7 +55,8 @@ def test_collect_on_a_full_disk_keeps_its_committed_samples_in_one_line(tiny_lib
 fill_but 4
 {collect} --samples 400
 echo "status $?"
-"{sys.executable}" -c 'import sys; from gaitlib.transitions import validate; print("kept", validate(sys.argv[1]).count)' "$DISK/t.h5"
+"{sys.executable}" -c 'import sys; from gaitlib.transitions import validate as v; print("kept",v(sys.argv[1]).count)' \\
+    "$DISK/t.h5"
 """)
     assert "status 2" in done.stdout, done.stderr  # one line: no segfault (139), no traceback (1)
     _one_line(done.stderr, f"gaitlib: error: could not write {tmp_path}/disk/t.h5")

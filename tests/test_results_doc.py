@@ -219,7 +219,7 @@ def test_each_table_is_on_its_own_page(tmp_path: Path, evidence: Path) -> None:
     assert "| trot → pace | stand | 92.0 | 98.8 |" in switching_page.read_text()
     misplaced = tmp_path / "results.md"
     misplaced.write_text("<!-- table: routes -->\nold\n<!-- /table -->\n")
-    with pytest.raises(ValueError, match="the table marker 'routes' is for docs/switching_results.md"):
+    with pytest.raises(ValueError, match=r"the table marker 'routes' is for docs/switching_results\.md"):
         tables.write_doc(misplaced, evidence, tmp_path / "accuracy.json")
     other = tmp_path / "notes.md"
     other.write_text("<!-- table: quality-bar -->\nold\n<!-- /table -->\n")
@@ -524,8 +524,8 @@ def test_where_the_shipped_librarys_switches_fail_from_a_small_map(tmp_path: Pat
                                       ("stand-pace", [100, 99, 98, 100], [100, 99, 98, 100], [0.5])):
         ok = sum(source)
         pairs.append({"pair": pair, "overall": _rates([ok], 400)[0], "bins": 4, "grid_samples": [], "grid_success": [],
-                      "by_source_phase": _rates(source) + [{"samples": 0, "successes": 0, "rate": None,
-                                                            "ci95": [0.0, 1.0]}],
+                      "by_source_phase": [*_rates(source),
+                                          {"samples": 0, "successes": 0, "rate": None, "ci95": [0.0, 1.0]}],
                       "by_dest_phase": _rates(dest), "by_contacts": {}, "fall_after_s": falls,
                       "touches": _rates([20], 400)[0]})
     _store(evidence, "map-0n", {"source": "data/robust-0n.h5", "falls": "trunk", "fall_after_s_q99": 1.23,

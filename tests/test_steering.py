@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from cli_runner import gaitlib_quick
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
@@ -30,7 +31,6 @@ from gaitlib.library import Library
 from gaitlib.robots.a1 import constants as c
 from gaitlib.rotations import quat_from_yaw, quat_multiply, yaw_of
 from gaitlib.sim import make_backend
-from cli_runner import gaitlib_quick
 
 STEERING = {  # gait: (forward m/s, lateral m/s, yaw rad/s)
     "trot_left": (0.5, 0.0, 0.5),

@@ -74,7 +74,7 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
 def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
     path = recorded[0]
     for bad in ({"horizon_s": 0.0}, {"horizon_s": 6.0}, {"margin": 1.0}, {"margin": -0.1}):
-        with pytest.raises(GaitlibError, match="horizon|margin"):
+        with pytest.raises(GaitlibError, match=r"horizon|margin"):
             check_guard(**bad)
     run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "fit", str(path), "--library",
                           str(tmp_path / "nothing"), "--margin", "1.5"], capture_output=True, text=True)

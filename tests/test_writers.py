@@ -78,9 +78,8 @@ def test_a_second_writer_of_a_library_is_refused_while_one_writes(switching_libr
         holder = f"process {os.getpid()} ({command_line()})"
         assert refused.stderr == (f"gaitlib: error: gaitlib routes refused: library {library.root} is being written "
                                   f"by {holder}\n")
-        with pytest.raises(GaitlibError, match=r"^gaitlib train refused: .* is being written by process"), library_writer(
-            library.root, command="gaitlib train"
-        ):
+        busy = r"^gaitlib train refused: .* is being written by process"
+        with pytest.raises(GaitlibError, match=busy), library_writer(library.root, command="gaitlib train"):
             pass
     assert not (library.root / WRITER_LOCK).exists()
 

@@ -32,7 +32,6 @@ from benchmarks.results.evidence import (
     pct,
     speed_heading_misses,
 )
-
 from gaitlib.training.recipe import PAPER_RECIPE, Recipe
 
 __all__ = [

@@ -45,7 +45,8 @@ def gaits_command(
     for d, c in checks:
         table.add_row(
             d.name, f"{d.forward_speed:.2f}", f"{d.lateral_speed:.2f}", f"{d.yaw_rate:.2f}", f"{d.period:.3f}",
-            f"{d.duty_factor:.2f}", f"{c.tilt_deg[0]:.1f}", f"{c.tilt_deg[1]:.1f}", f"{c.outside_share:.0%}", f"{c.flight_s * 1000:.0f}",
+            f"{d.duty_factor:.2f}", f"{c.tilt_deg[0]:.1f}", f"{c.tilt_deg[1]:.1f}", f"{c.outside_share:.0%}",
+            f"{c.flight_s * 1000:.0f}",
             f"{c.flight_drop_m * 100:.1f}", f"{c.steady_shift_m * 100:.1f}", "yes" if c.followable else "unlikely",
         )
     table_console().print(table)

@@ -217,11 +217,10 @@ def benchmark_command(
     )
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds, cluster_config, parse_magnitudes, parse_pairs
+    from gaitlib.cli.preflight import writable_folder
     from gaitlib.errors import GaitlibError
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
-
-    from gaitlib.cli.preflight import writable_folder
 
     cluster = cluster_config(ray, address, workers)
     writable_folder("--out", out)
@@ -304,8 +303,14 @@ def routes_command(
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds
     from gaitlib.cli.preflight import writable_folder
-    from gaitlib.library.target import check_library, check_writable, copy_library, library_writer, writing_target
-    from gaitlib.library.target import measurement_id
+    from gaitlib.library.target import (
+        check_library,
+        check_writable,
+        copy_library,
+        library_writer,
+        measurement_id,
+        writing_target,
+    )
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 

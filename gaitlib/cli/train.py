@@ -123,6 +123,7 @@ def train_command(
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
+    from gaitlib.cli.preflight import no_effect, writable_folder
     from gaitlib.cli.progress import job_progress
     from gaitlib.gaits import clip_from_description
     from gaitlib.gaits.feasibility import check_reference
@@ -132,8 +133,6 @@ def train_command(
     from gaitlib.training.recipe import Recipe
     from gaitlib.training.target import check_target
     from gaitlib.training.trainer import TrainRequest, resume_point, train_gait
-
-    from gaitlib.cli.preflight import no_effect, writable_folder
 
     no_effect(ctx, ("kick_max", "kick_draw", "kick_interval"), when=push_kind == "force",
               because="with --push-kind force (its pushes are forces, not kicks)")

@@ -9,7 +9,6 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
-from gaitlib.defaults import MIN_PER_LABEL
 from gaitlib.cli.options import (
     CHUNK,
     COUNT,
@@ -23,6 +22,7 @@ from gaitlib.cli.options import (
     ray_option,
     workers_option,
 )
+from gaitlib.defaults import MIN_PER_LABEL
 
 __all__ = ["collect_command", "fit_command", "map_command", "states_command"]
 
@@ -291,10 +291,9 @@ def map_command(
     """Map where switches fail: per ordered pair, success over source x destination phase, per tenth of either
     cycle and by the feet on the ground, with counts and 95% intervals, and when switch-caused falls happen."""
     from gaitlib.benchmark.maps import fall_time_quantile, transition_maps, write_map_json, write_map_plot
+    from gaitlib.cli.preflight import writable_folder
     from gaitlib.cli.tables import print_measures, table_console
     from gaitlib.transitions import read
-
-    from gaitlib.cli.preflight import writable_folder
 
     out = writable_folder("--out", out if out is not None else data.with_name(data.stem + "-map"))
     samples = read(data)

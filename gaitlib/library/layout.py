@@ -13,11 +13,11 @@ from gaitlib.errors import TransitionDataError
 
 __all__ = [
     "PACKAGED_LIBRARY",
+    "SHIPPED_MARKER",
     "check_identities",
     "default_library_dir",
     "first_fit",
     "gait_order",
-    "SHIPPED_MARKER",
     "is_shipped",
     "ordered_pairs",
     "protection",

@@ -77,7 +77,8 @@ def staged_folder(final: Path) -> Iterator[Path]:
                 raise OSError(error.errno, error.strerror, str(final)) from error
             if not Path(error.filename).is_relative_to(staging):
                 raise
-            raise OSError(error.errno, error.strerror, str(final / Path(error.filename).relative_to(staging))) from error
+            named = final / Path(error.filename).relative_to(staging)
+            raise OSError(error.errno, error.strerror, str(named)) from error
         except BaseException:
             shutil.rmtree(staging, ignore_errors=True)
             raise

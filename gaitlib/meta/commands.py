@@ -10,6 +10,7 @@ over (forward, lateral, yaw rate x :data:`TURN_RADIUS_M`): the yaw rate becomes 
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -171,7 +172,7 @@ def waypoint_commands(points: np.ndarray, skills: Sequence[Skill]) -> Commands:
         raise GaitlibError("waypoints need a skill that goes straight ahead; the library holds none")
     forward = min(ahead, key=lambda s: s.velocity[0]).velocity
     times, velocities, heading = [0.0], [], 0.0
-    for k, (start, end) in enumerate(zip(points[:-1], points[1:], strict=True)):
+    for k, (start, end) in enumerate(itertools.pairwise(points)):
         step = end - start
         turn = math.remainder(math.atan2(step[1], step[0]) - heading, 2 * math.pi)
         if abs(turn) > math.radians(1.0):

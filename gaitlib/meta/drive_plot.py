@@ -18,8 +18,9 @@ _SMOOTH_S = 0.5
 
 def plot_drive(result: DriveResult, path: Path) -> Path:
     """Write ``result`` as a PNG (atomically): on the left the plane, the commanded path dashed, the robot's path
-    solid, its switches (red dots), the guard's catches (orange), its start (green) and a fall (purple cross); on the right the forward speed,
-    lateral speed and yaw rate commanded (steps) and achieved (a moving mean), requests and switches marked."""
+    solid, its switches (red dots), the guard's catches (orange), its start (green) and a fall (purple cross); on the
+    right the forward speed, lateral speed and yaw rate commanded (steps) and achieved (a moving mean), requests and
+    switches marked."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -17,6 +17,7 @@ then warns before the most falls. The estimate is written into the library's swi
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,7 +201,7 @@ def _judge(data: dict, rows: np.ndarray, p: np.ndarray, margin: float, dt: float
 def _reliability(p: np.ndarray, up: np.ndarray, bins: int = 10) -> list[dict]:
     edges = np.linspace(0, 1, bins + 1)
     rows = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         inside = (p >= lo) & ((p < hi) | (hi == 1))
         if inside.any():
             rows.append({"bin": [float(lo), float(hi)], "states": int(inside.sum()),
@@ -257,7 +258,7 @@ def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identit
         "rule": f"horizon and margin chosen on the selection split (20% of episodes): the smallest margin of "
                 f"{MARGINS[0]}-{MARGINS[-1]} with at most {FALSE_ALARMS_PER_MIN} firings per unshoved minute, then "
                 "the horizon warning before the most falls; Platt scaling per gait on the calibration split (20%)",
-        "states": int(len(data["gait"])), "episodes": int(len(np.unique(data["episode"]))), "epochs": epochs,
+        "states": len(data["gait"]), "episodes": len(np.unique(data["episode"])), "epochs": epochs,
         "seed": seed, "dt": dt,
     }
     return estimate

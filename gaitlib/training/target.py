@@ -46,8 +46,9 @@ class TrainTarget:
 def check_target(library: Path, gait: str, *, preset: str, replace: bool, copy_from: Path | None = None,
                  states: Path | None = None) -> TrainTarget:
     """Refuse, before any work, a run that would write a protected library without ``replace``, write a library
-    another process writes now, or put the tests' preset among trained gaits; otherwise say which switching pairs the new entry will leave stale, and, when the
-    handover ``states`` were recorded with other policies than the library's, whose they are."""
+    another process writes now, or put the tests' preset among trained gaits; otherwise say which switching pairs the
+    new entry will leave stale, and, when the handover ``states`` were recorded with other policies than the
+    library's, whose they are."""
     lib = Library(copy_from if copy_from is not None else library)
     names = lib.gaits()
     if copy_from is None:  # a protected library only with --replace; no other writer of it now

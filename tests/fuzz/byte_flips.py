@@ -54,13 +54,13 @@ from identity_kinds import overlap, resume_reader, resume_target, start_resumabl
 from structured_edits import edit, edit_targets
 from tensordict import TensorDict
 
+from gaitlib import gaits
 from gaitlib.benchmark.results import load_results
 from gaitlib.benchmark.routes import routes_from_results
 from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs.handover import load_states
 from gaitlib.errors import GaitlibError
-from gaitlib import gaits
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library
 from gaitlib.meta import TrialProtocol, load_switching
