@@ -9,7 +9,7 @@ from importlib.metadata import version
 
 import typer
 
-from gaitlib.cli import drive, gaits, library, survival, switching, throughput, train, transitions
+from gaitlib.cli import drive, evaluate, gaits, library, routes, survival, switching, throughput, train, transitions
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -40,7 +40,7 @@ def _options(
 
 
 app.command("train")(train.train_command)
-app.command("eval")(train.eval_command)
+app.command("eval")(evaluate.eval_command)
 app.command("library")(library.library_command)
 app.command("gaits")(gaits.gaits_command)
 app.command("collect")(transitions.collect_command)
@@ -49,7 +49,7 @@ app.command("states")(transitions.states_command)
 app.command("map")(transitions.map_command)
 app.command("benchmark")(switching.benchmark_command)
 app.command("run")(switching.run_command)
-app.command("routes")(switching.routes_command)
+app.command("routes")(routes.routes_command)
 app.command("drive")(drive.drive_command)
 app.add_typer(throughput.app, name="throughput")
 app.add_typer(survival.app, name="survival")
