@@ -9,7 +9,7 @@ import typer
 
 from gaitlib.atomic import json_text
 from gaitlib.cli.guarding import choose_guard, guard_margin_option, guard_option, print_guard
-from gaitlib.cli.options import DELAY_STEPS, SEED, bounded, falls_option
+from gaitlib.cli.options import SEED, action_delay_option, bounded, falls_option
 from gaitlib.defaults import DEFAULT_STRATEGY
 
 __all__ = ["drive_command"]
@@ -27,10 +27,7 @@ def drive_command(
     strategy: str = typer.Option(
         DEFAULT_STRATEGY, "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
     ),
-    action_delay: int | None = bounded(
-        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
-        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
-    ),
+    action_delay: int | None = action_delay_option(),
     seed: int = bounded(0, "--seed", help="Random seed (randomization, strategy);", bounds=SEED),
     plot: Path = typer.Option(Path("drive.png"), "--plot", help="Where to write the plot (PNG)."),
     video: Path | None = typer.Option(None, "--video", help="Also render a video of the drive (MP4)."),

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
+from gaitlib.cli.guarding import guard_margin_option, opt_in_guard_option
 from gaitlib.cli.options import DELAY_STEPS, EPISODE_SECONDS, PUSH_N, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.cli.tables import print_measures, rate_text
 from gaitlib.defaults import Falls
@@ -45,10 +46,9 @@ def eval_command(
         "in the library --library names, else $GAITLIB_LIBRARY, else your own runs/library."
     ),
     replace: bool = typer.Option(False, "--replace", help="With --record: into the shipped library (refused without)."),
-    guard: bool = typer.Option(False, "--guard", help="Run on the meta-controller with the guard on, beside the same "
-                               "draws unguarded, under --impulses or --push-max (docs/switching.md, \"The guard\")."),
-    guard_margin: float | None = typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in "
-                                              "[0, 1) (default: the one chosen with the survival estimate)."),
+    guard: bool = opt_in_guard_option("Run on the meta-controller with the guard on, beside the same draws unguarded, "
+                                      "under --impulses or --push-max (docs/switching.md, \"The guard\")."),
+    guard_margin: float | None = guard_margin_option(opt_in=True),
 ) -> None:
     """Evaluate a library policy under paper Table 1 randomization: falls, leg touches, heading held, tracking
     errors; or, with --impulses, its fall rate against a single push's impulse (with --guard, guarded and not)."""

@@ -1,11 +1,12 @@
-"""The guard on the command line, for the commands that run one robot on the meta-controller (``gaitlib run``,
-``gaitlib drive``): its options, whether it is on, and its catches printed."""
+"""The guard on the command line: its options (on by default for the commands that run one robot on the
+meta-controller, ``gaitlib run`` and ``drive``; asked for with ``--guard`` in ``benchmark`` and ``eval``), whether
+it is on, and its catches printed."""
 
 from __future__ import annotations
 
 import typer
 
-__all__ = ["choose_guard", "guard_margin_option", "guard_option", "print_guard"]
+__all__ = ["choose_guard", "guard_margin_option", "guard_option", "opt_in_guard_option", "print_guard"]
 
 
 def guard_option():
@@ -15,8 +16,17 @@ def guard_option():
                         "estimate runs unguarded and says so.")
 
 
-def guard_margin_option():
-    """``--guard-margin``: the guard's margin instead of the library's."""
+def opt_in_guard_option(help: str):
+    """``--guard``, off by default (``help`` says what it guards); ``--guard-margin`` turns it on too."""
+    return typer.Option(False, "--guard", help=help)
+
+
+def guard_margin_option(*, opt_in: bool = False):
+    """``--guard-margin``: the guard's margin instead of the library's; ``opt_in`` for a command whose guard is off
+    unless asked for (:func:`opt_in_guard_option`)."""
+    if opt_in:
+        return typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in [0, 1) (default: the "
+                            "one chosen with the survival estimate).")
     return typer.Option(None, "--guard-margin", help="The guard's margin, in [0, 1) (default: the one chosen with "
                         "the library's survival estimate).")
 

@@ -33,6 +33,7 @@ __all__ = [
     "WORLD_BYTES",
     "Bounds",
     "OptionError",
+    "action_delay_option",
     "bounded",
     "check_worlds",
     "cluster_config",
@@ -88,6 +89,13 @@ _FALLS_HELP = (
     "legged_gym's and Isaac Lab's A1 tasks count one; a leg's touch ridden through is reported beside as a touch) or "
     "contact (gaitlib's strict definition: any non-foot body on the ground is a fall too)."
 )
+
+
+def action_delay_option():
+    """``--action-delay``: a fixed delay of every action, control steps, instead of the policies' trained random
+    one (``gaitlib run``, ``drive``, ``benchmark``)."""
+    return bounded(None, "--action-delay", help="Control steps every action waits before it reaches the servos, "
+                   "fixed (default: the policies' trained random delay);", bounds=DELAY_STEPS)
 
 
 def falls_option(name: str = "--falls", *, help: str = _FALLS_HELP):

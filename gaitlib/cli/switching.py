@@ -8,10 +8,9 @@ from pathlib import Path
 import typer
 
 from gaitlib.atomic import json_text
-from gaitlib.cli.guarding import choose_guard, guard_margin_option, guard_option, print_guard
+from gaitlib.cli.guarding import choose_guard, guard_margin_option, guard_option, opt_in_guard_option, print_guard
 from gaitlib.cli.options import (
     COUNT,
-    DELAY_STEPS,
     EPISODE_SECONDS,
     MAX_MAGNITUDES,
     MOTOR_STRENGTH,
@@ -19,6 +18,7 @@ from gaitlib.cli.options import (
     SEED,
     TIME_IN_RUN,
     WORLDS,
+    action_delay_option,
     bounded,
     falls_option,
     ray_address_argument,
@@ -51,10 +51,7 @@ def run_command(
         help="Push magnitude (0: none); pushes from 0.6 s before each request until 2 s after it;",
         bounds=PUSH_N,
     ),
-    action_delay: int | None = bounded(
-        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
-        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
-    ),
+    action_delay: int | None = action_delay_option(),
     seed: int = bounded(0, "--seed", help="Random seed (randomization, pushes, strategy);", bounds=SEED),
     plot: Path = typer.Option(Path("run.png"), "--plot", help="Where to write the plot (PNG)."),
     video: Path | None = typer.Option(None, "--video", help="Also render a video of the run (MP4)."),
@@ -184,10 +181,7 @@ def benchmark_command(
         None, "--robot", help="Run on another A1 model, an MJCF file (e.g. MuJoCo Menagerie's unitree_a1), adapted in "
         "memory (docs/robot.md); mujoco backend."
     ),
-    action_delay: int | None = bounded(
-        None, "--action-delay", help="Control steps every action waits before it reaches the servos, fixed "
-        "(default: the policies' trained random delay);", bounds=DELAY_STEPS,
-    ),
+    action_delay: int | None = action_delay_option(),
     motor_strength: float = bounded(
         1.0, "--motor-strength", help="Multiple of the PD torque the motors deliver, kp, kd and torque limit alike "
         "(mujoco backend);", bounds=MOTOR_STRENGTH,
@@ -195,10 +189,9 @@ def benchmark_command(
     routed: bool = typer.Option(False, "--routed", help="Each transition follows the library's route table "
                                 "(gaitlib routes): through another gait where that measured better, counted once."),
     falls: str = falls_option(),
-    guard: bool = typer.Option(False, "--guard", help="Every transition with the guard on (docs/switching.md, \"The "
-                               "guard\"); off by default, so that the strategies' figures stay the paper's."),
-    guard_margin: float | None = typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in "
-                                              "[0, 1) (default: the one chosen with the survival estimate)."),
+    guard: bool = opt_in_guard_option("Every transition with the guard on (docs/switching.md, \"The guard\"); off by "
+                                      "default, so that the strategies' figures stay the paper's."),
+    guard_margin: float | None = guard_margin_option(opt_in=True),
     ray: bool = ray_option(),
     address: str | None = ray_address_argument(),
     workers: int | None = workers_option(),
