@@ -41,7 +41,7 @@ def drive_command(
     """Drive one robot by --commands (or through --waypoints): at each command the skill nearest the commanded
     velocity is requested and the meta-controller switches to it with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError
-    from gaitlib.cli.preflight import needs_module, writable_file
+    from gaitlib.cli.preflight import plot_and_video
     from gaitlib.meta import load_switching
     from gaitlib.meta.commands import read_commands, read_waypoints, skills_of, waypoint_commands
     from gaitlib.meta.drive import drive
@@ -50,10 +50,7 @@ def drive_command(
 
     if (commands is None) == (waypoints is None):
         raise OptionError("gaitlib drive takes one of --commands FILE.csv or --waypoints FILE.csv")
-    writable_file("--plot", plot)
-    if video is not None:
-        writable_file("--video", video)
-        needs_module("--video", ("imageio", "imageio_ffmpeg"), install="pip install 'gaitlib[video]'")
+    plot_and_video(plot, video)
     points = read_waypoints(waypoints) if waypoints is not None else None
     timeline = read_commands(commands) if commands is not None else None
     check_guard(margin=guard_margin)

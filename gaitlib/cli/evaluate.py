@@ -53,7 +53,7 @@ def eval_command(
     """Evaluate a library policy under paper Table 1 randomization: falls, leg touches, heading held, tracking
     errors; or, with --impulses, its fall rate against a single push's impulse (with --guard, guarded and not)."""
     from gaitlib.cli.options import IMPULSE_NS, check_worlds, parse_values
-    from gaitlib.cli.preflight import no_effect, writable_file, writable_folder
+    from gaitlib.cli.preflight import no_effect, writable_file, writing_library
     from gaitlib.library import Library
 
     no_effect(ctx, ("replace",), when=not record, because="without --record (nothing is written)")
@@ -85,11 +85,10 @@ def eval_command(
         return
     # --record: into the library a writing command writes (gaitlib.library.target), a protected one on purpose only,
     # its writer lock held from before the evaluation (a second writer is refused before, not after, the work)
-    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import copy_library, library_writer
 
-    library, copy_from = writing_target(library)
-    writable_folder("--library", library, what="a library folder")
-    check_writable(library, replace=replace, command="gaitlib eval --record", what=f"the entry {gait}")
+    library, copy_from = writing_library(library, replace=replace, command="gaitlib eval --record",
+                                         what=f"the entry {gait}")
     Library(copy_from or library).entry(gait)  # an unknown gait: one line, before the copy
     if copy_from is not None:
         copy_library(copy_from, library)

@@ -17,7 +17,15 @@ import typer
 
 from gaitlib.cli.options import OptionError
 
-__all__ = ["given", "needs_module", "no_effect", "writable_file", "writable_folder"]
+__all__ = [
+    "given",
+    "needs_module",
+    "no_effect",
+    "plot_and_video",
+    "writable_file",
+    "writable_folder",
+    "writing_library",
+]
 
 
 def given(ctx: typer.Context, name: str) -> bool:
@@ -62,6 +70,28 @@ def writable_folder(option: str, path: Path, *, what: str = "a folder") -> Path:
         raise OptionError(f"{option} {path} is a file, not {what}")
     _creatable(option, path, of=path)
     return path
+
+
+def plot_and_video(plot: Path, video: Path | None) -> None:
+    """``--plot`` and ``--video`` (when given) writable, and the packages ``--video`` needs installed (``gaitlib
+    run``, ``drive``)."""
+    writable_file("--plot", plot)
+    if video is not None:
+        writable_file("--video", video)
+        needs_module("--video", ("imageio", "imageio_ffmpeg"), install="pip install 'gaitlib[video]'")
+
+
+def writing_library(library: Path | None, *, replace: bool, command: str, what: str) -> tuple[Path, Path | None]:
+    """(the library ``command`` writes ``what`` into, the library to copy there first:
+    :func:`~gaitlib.library.target.writing_target`), after refusing a target that is a file or cannot be made, and
+    one that is protected without ``replace`` or held by another writer
+    (:func:`~gaitlib.library.target.check_writable`)."""
+    from gaitlib.library.target import check_writable, writing_target
+
+    target, copy_from = writing_target(library)
+    writable_folder("--library", target, what="a library folder")
+    check_writable(target, replace=replace, command=command, what=what)
+    return target, copy_from
 
 
 def _creatable(option: str, folder: Path, *, of: Path) -> None:

@@ -40,24 +40,15 @@ def routes_command(
     from gaitlib.benchmark.routes import routes_from_results
     from gaitlib.benchmark.sweep import SweepConfig
     from gaitlib.cli.options import check_worlds
-    from gaitlib.cli.preflight import writable_folder
-    from gaitlib.library.target import (
-        check_library,
-        check_writable,
-        copy_library,
-        library_writer,
-        measurement_id,
-        writing_target,
-    )
+    from gaitlib.cli.preflight import writable_folder, writing_library
+    from gaitlib.library.target import check_library, copy_library, library_writer, measurement_id
     from gaitlib.meta import load_switching
     from gaitlib.strategies import get_strategy
 
     check_worlds("--worlds", worlds, backend=backend)
     if out is not None:
         writable_folder("--out", out)
-    target, copy_from = writing_target(library)
-    writable_folder("--library", target, what="a library folder")
-    check_writable(target, replace=replace, command="gaitlib routes", what="the route table")
+    target, copy_from = writing_library(library, replace=replace, command="gaitlib routes", what="the route table")
     check_library(copy_from or target, command="gaitlib routes")
     setup = load_switching(copy_from or target)
     get_strategy(strategy, setup.resources)  # an unknown name or missing models: one line, before any work

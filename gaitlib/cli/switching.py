@@ -67,7 +67,7 @@ def run_command(
     """Run one robot in --from, request --to (one gait or several in turn), and let the meta-controller switch
     with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError
-    from gaitlib.cli.preflight import needs_module, writable_file
+    from gaitlib.cli.preflight import plot_and_video
     from gaitlib.cli.routes import route_table
     from gaitlib.meta import load_switching
     from gaitlib.meta.episode import run_episode
@@ -77,10 +77,7 @@ def run_command(
     sequence = [g.strip() for g in dests.split(",")]
     if "" in sequence:
         raise OptionError(f"--to takes gait names separated by commas, got '{dests}'")
-    writable_file("--plot", plot)
-    if video is not None:
-        writable_file("--video", video)
-        needs_module("--video", ("imageio", "imageio_ffmpeg"), install="pip install 'gaitlib[video]'")
+    plot_and_video(plot, video)
     check_guard(margin=guard_margin)
     setup = load_switching(library)
     guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)

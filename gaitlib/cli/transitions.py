@@ -218,9 +218,9 @@ def fit_command(
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
-    from gaitlib.cli.preflight import no_effect, writable_folder
+    from gaitlib.cli.preflight import no_effect, writing_library
     from gaitlib.library import Library
-    from gaitlib.library.target import check_library, check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import check_library, copy_library, library_writer
     from gaitlib.strategies.fitting import check_validatable, evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
@@ -232,9 +232,7 @@ def fit_command(
         samples = read_all(data, current=lib.identities())
         _report(evaluate_library(lib, samples, sources=data, falls=falls), as_json)
         return
-    target, copy_from = writing_target(library)
-    writable_folder("--library", target, what="a library folder")
-    check_writable(target, replace=replace, command="gaitlib fit", what="the switching models")
+    target, copy_from = writing_library(library, replace=replace, command="gaitlib fit", what="the switching models")
     check_library(copy_from or target, command="gaitlib fit")
     samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
     check_validatable(samples, falls=falls, min_per_label=min_per_label)  # too few to validate: refused here too
