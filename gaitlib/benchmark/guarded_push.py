@@ -13,7 +13,6 @@ a catch before the shove is a false catch) and how long until the measured gait 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -23,10 +22,9 @@ from gaitlib.defaults import DEFAULT_FALLS, Falls
 from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import FallTally, TerminationConfig
-from gaitlib.evaluation import AFTER_S, SECTORS, SETTLE_S, FallRecord, PushPoint
+from gaitlib.evaluation import AFTER_S, SETTLE_S, FallRecord, PushPoint, SinglePush
 from gaitlib.meta.guard import Guard
 from gaitlib.meta.setup import SwitchingSetup
-from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
 
 __all__ = ["guarded_episodes", "guarded_push_curve"]
@@ -53,25 +51,13 @@ def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, e
         dev, n, dt = env.device, env.num_envs, env.dt
         env.reset_worlds(torch.arange(n, device=dev), gait=torch.full((n,), g, dtype=torch.long, device=dev))
         ctl = setup.controller(env, "net-lookahead", guard=guard, seed=seed)
-        gen = torch.Generator().manual_seed(seed)
-        start = torch.round((SETTLE_S + cycle_s * torch.rand(n, generator=gen)) / dt).long().to(dev)
-        length = max(1, round(duration_s / dt))
-        angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)
-        force = impulse / (length * dt)
+        push = SinglePush(env, impulse=impulse, duration_s=duration_s, cycle_s=cycle_s, seed=seed)
         alive = torch.ones(n, dtype=torch.bool, device=dev)
         tally = FallTally(n, dev)
         catches, measured_steps, steps = [], 0, 0
         with torch.inference_mode():
             for step in range(env.max_episode_length):
-                begins, ends = (start == step) & alive, (start + length == step) & alive
-                if begins.any():
-                    ids = begins.nonzero().squeeze(1)
-                    heading = yaw_of(env.sim_state.root_quat[ids]) + angle[ids]
-                    push = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
-                    env.backend.set_trunk_force(ids, force * push)
-                if ends.any():
-                    ids = ends.nonzero().squeeze(1)
-                    env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
+                push(step, alive)
                 result = ctl.step()
                 catches += [c for c in result.catches if bool(alive[c.world])]
                 measured_steps += int(((env.gait == g) & alive).sum())
@@ -81,13 +67,12 @@ def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, e
                 alive &= ~result.fell & (env.episode_length_buf > 0)  # a time-out resets the world too
     finally:
         sim.close()
-    sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
-    fell = tally.fell.cpu()
-    by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
-    counted = FallRecord(episodes=n, fell=int(fell.sum()), touched=int(tally.touched.sum()),
+    counted = FallRecord(episodes=n, fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
                          longest_touch_s=float(tally.longest.max()) * dt, falls=cfg.termination.falls)
-    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=force, by_sector=by_sector,
-                     guard=_guard_summary(guard, catches, start.cpu(), setup.gaits, dt, measured_steps / max(1, steps)))
+    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=push.force_n,
+                     by_sector=push.by_sector(tally.fell),
+                     guard=_guard_summary(guard, catches, push.start.cpu(), setup.gaits, dt,
+                                          measured_steps / max(1, steps)))
 
 
 def _guard_summary(guard: Guard | None, catches: list, start: torch.Tensor, gaits: tuple[str, ...], dt: float,

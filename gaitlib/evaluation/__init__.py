@@ -5,7 +5,15 @@ run one rollout loop and count falls, touches and their intervals in one record 
 :class:`FallRecord`)."""
 
 from gaitlib.evaluation.evaluate import EvalResult, SteeringFigures, evaluate_policy, steers
-from gaitlib.evaluation.push_curve import AFTER_S, SECTORS, SETTLE_S, PushPoint, single_push_curve, write_push_plot
+from gaitlib.evaluation.push_curve import (
+    AFTER_S,
+    SECTORS,
+    SETTLE_S,
+    PushPoint,
+    SinglePush,
+    single_push_curve,
+    write_push_plot,
+)
 from gaitlib.evaluation.rollout import FallRecord, rollout
 from gaitlib.evaluation.switch_in import SwitchIn, switch_in
 
@@ -16,6 +24,7 @@ __all__ = [
     "EvalResult",
     "FallRecord",
     "PushPoint",
+    "SinglePush",
     "SteeringFigures",
     "SwitchIn",
     "evaluate_policy",

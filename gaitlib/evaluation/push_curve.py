@@ -28,7 +28,7 @@ from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
 
-__all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "single_push_curve", "write_push_plot"]
+__all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "SinglePush", "single_push_curve", "write_push_plot"]
 
 SETTLE_S = 1.0
 """Walking time before the push window opens, s."""
@@ -72,6 +72,44 @@ class PushPoint(FallRecord):
                    by_sector={name: tuple(n) for name, n in point["by_sector"].items()}, guard=point.get("guard"))
 
 
+class SinglePush:
+    """The one push of each world of ``env``, drawn from ``seed``: it begins at a uniformly random moment of the
+    ``cycle_s`` s after :data:`SETTLE_S`, lasts ``duration_s`` s, and pushes with ``impulse / duration`` N in a
+    uniformly random direction relative to the robot's heading as it begins. Called with (control step, worlds
+    alive) before each step, it starts and ends the pushes due then."""
+
+    def __init__(self, env, *, impulse: float, duration_s: float, cycle_s: float, seed: int) -> None:
+        dev, n, dt = env.device, env.num_envs, env.dt
+        gen = torch.Generator().manual_seed(seed)
+        self.env = env
+        self.start = torch.round((SETTLE_S + cycle_s * torch.rand(n, generator=gen)) / dt).long().to(dev)
+        """Control step at which each world's push begins."""
+        self.length = max(1, round(duration_s / dt))
+        """Control steps each push lasts."""
+        self.angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)  # relative to the heading at the push
+        """Direction of each world's push relative to its heading as the push begins, rad."""
+        self.force_n = impulse / (self.length * dt)
+        """Force of every push, N."""
+
+    def __call__(self, step: int, alive: torch.Tensor) -> None:
+        env = self.env
+        begins, ends = (self.start == step) & alive, (self.start + self.length == step) & alive
+        if begins.any():
+            ids = begins.nonzero().squeeze(1)
+            heading = yaw_of(env.sim_state.root_quat[ids]) + self.angle[ids]
+            direction = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
+            env.backend.set_trunk_force(ids, self.force_n * direction)
+        if ends.any():
+            ids = ends.nonzero().squeeze(1)
+            env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=env.device))
+
+    def by_sector(self, fell: torch.Tensor) -> dict[str, tuple[int, int]]:
+        """Sector of :data:`SECTORS` -> (worlds of ``fell``, a flag per world, that fell; worlds pushed there)."""
+        sector = torch.remainder(torch.round(self.angle / (math.pi / 2)), 4).long().cpu()
+        fell = fell.cpu()
+        return {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
+
+
 def single_push_curve(
     policy: GaitPolicy,
     clip: ReferenceClip,
@@ -102,31 +140,12 @@ def _point(policy, clip, cfg: EnvConfig, impulse: float, episodes: int, duration
     sim = make_backend(backend, num_worlds=episodes)
     try:
         env = ImitationEnv(sim, [clip], cfg, seed=seed)
-        dev, n, dt = env.device, env.num_envs, env.dt
-        gen = torch.Generator().manual_seed(seed)
-        start = torch.round((SETTLE_S + cycle_s * torch.rand(n, generator=gen)) / dt).long().to(dev)
-        length = max(1, round(duration_s / dt))
-        angle = (2 * math.pi * torch.rand(n, generator=gen)).to(dev)  # relative to the heading at the push
-        force = impulse / (length * dt)
-
-        def push(step: int, alive: torch.Tensor) -> None:
-            begins, ends = (start == step) & alive, (start + length == step) & alive
-            if begins.any():
-                ids = begins.nonzero().squeeze(1)
-                heading = yaw_of(env.sim_state.root_quat[ids]) + angle[ids]
-                direction = torch.stack([torch.cos(heading), torch.sin(heading), torch.zeros_like(heading)], 1)
-                env.backend.set_trunk_force(ids, force * direction)
-            if ends.any():
-                ids = ends.nonzero().squeeze(1)
-                env.backend.set_trunk_force(ids, torch.zeros(len(ids), 3, device=dev))
-
+        push = SinglePush(env, impulse=impulse, duration_s=duration_s, cycle_s=cycle_s, seed=seed)
         counted, tally = rollout(env, policy, steps=env.max_episode_length, before=push)
     finally:
         sim.close()
-    sector = torch.remainder(torch.round(angle / (math.pi / 2)), 4).long().cpu()
-    fell = tally.fell.cpu()
-    by_sector = {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
-    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=force, by_sector=by_sector)
+    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=push.force_n,
+                     by_sector=push.by_sector(tally.fell))
 
 
 def write_push_plot(curves: dict[str, list[PushPoint]], path) -> None:
