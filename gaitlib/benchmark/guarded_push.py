@@ -67,8 +67,7 @@ def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, e
                 alive &= ~result.fell & (env.episode_length_buf > 0)  # a time-out resets the world too
     finally:
         sim.close()
-    counted = FallRecord(episodes=n, fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
-                         longest_touch_s=float(tally.longest.max()) * dt, falls=cfg.termination.falls)
+    counted = FallRecord.of(tally, dt=dt, falls=cfg.termination.falls)
     return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=push.force_n,
                      by_sector=push.by_sector(tally.fell),
                      guard=_guard_summary(guard, catches, push.start.cpu(), setup.gaits, dt,
@@ -119,8 +118,7 @@ def guarded_episodes(setup: SwitchingSetup, gait: str, *, guard: Guard | None, e
                 alive &= ~result.fell & (env.episode_length_buf > 0)
     finally:
         sim.close()
-    counted = FallRecord(episodes=n, fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
-                         longest_touch_s=float(tally.longest.max()) * dt, falls=cfg.termination.falls)
+    counted = FallRecord.of(tally, dt=dt, falls=cfg.termination.falls)
     minutes = steps * dt / 60
     summary = _guard_summary(guard, catches, torch.full((n,), -1), setup.gaits, dt, measured_steps / max(1, steps))
     summary.pop("false_catches"), summary.pop("delay_steps_median")  # no shove to measure them from

@@ -67,6 +67,13 @@ class FallRecord:
         """Wilson 95% interval of :attr:`touch_rate`."""
         return wilson_interval(self.touched, self.episodes)
 
+    @classmethod
+    def of(cls, tally: FallTally, *, dt: float, falls: Falls) -> FallRecord:
+        """The record over every world of ``tally``, one episode each (``dt``: the control step, s; ``falls``: the
+        definition the environment counted)."""
+        return cls(episodes=len(tally.fell), fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
+                   longest_touch_s=float(tally.longest.max()) * dt, falls=falls)
+
     def counted(self) -> dict:
         """This record's own fields, by name (to make a record of a measure that holds one)."""
         return {f.name: getattr(self, f.name) for f in fields(FallRecord)}
@@ -92,6 +99,4 @@ def rollout(env: ImitationEnv, policy: GaitPolicy, *, steps: int, before: Before
             alive &= ~dones
             if after is not None:
                 after(extras, fell, ended, alive)
-    record = FallRecord(episodes=n, fell=int(tally.fell.sum()), touched=int(tally.touched.sum()),
-                        longest_touch_s=float(tally.longest.max()) * env.dt, falls=env.cfg.termination.falls)
-    return record, tally
+    return FallRecord.of(tally, dt=env.dt, falls=env.cfg.termination.falls), tally
