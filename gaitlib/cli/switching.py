@@ -225,7 +225,8 @@ def benchmark_command(
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
-    if guard or guard_margin is not None:
+    guard = guard or guard_margin is not None  # --guard-margin turns the guard on too
+    if guard:
         guarding = setup.guard(margin=guard_margin)  # no survival estimate, a stale one, a bad margin: one line
     detours = {}
     if routed:
@@ -240,7 +241,7 @@ def benchmark_command(
         backend=backend,
         seed=seed,
         falls=falls,
-        guard=guard or guard_margin is not None,
+        guard=guard,
         guard_margin=guard_margin,
         routes=detours,
     )
