@@ -73,11 +73,12 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     assert json.loads(ran.stdout)["strategy"] == "net" and (tmp_path / "run.png").is_file()
 
 
-def test_foreign_hdf5_is_one_error_line(tmp_path) -> None:
+def test_foreign_hdf5_is_one_error_line(tiny_library, tmp_path) -> None:
+    library = copy_library(tiny_library, tmp_path / "library")  # a library to fit into: the data alone is wrong
     path = tmp_path / "foreign.h5"
     with h5py.File(path, "w") as f:
         f["images"] = [1, 2, 3]
-    result = gaitlib_quick("fit", "--data", str(path), "--library", str(tmp_path))
+    result = gaitlib_quick("fit", "--data", str(path), "--library", str(library.root))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gaitlib: error:") and "foreign.h5" in lines[0]

@@ -107,5 +107,5 @@ def test_the_wheel_carries_the_shipped_library_and_runs_the_main_job_outside_the
     assert (elsewhere / "run.png").is_file()
     (out, err), code = done["refusal"]  # the installed copy is the shipped library: written only with --replace
     assert code == 2 and out == "" and err.count("\n") == 1
-    assert f"would rewrite the switching models of the shipped library ({installed_library})" in err
+    assert f"would rewrite the switching models of the shipped library, {installed_library};" in err
     assert sorted(p.name for p in elsewhere.iterdir()) == ["run.png"]
