@@ -5,8 +5,6 @@ library without a survival estimate runs unguarded and says so; a margin out of 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 import torch
@@ -19,6 +17,7 @@ from gaitlib.meta.guard import Guard
 from gaitlib.sim import make_backend
 from gaitlib.strategies import get_strategy
 from gaitlib.strategies.survival import SurvivalEstimate, SurvivalNet, save_survival
+from tests.cli_runner import gaitlib_quick
 from tests.conftest import copy_library
 
 
@@ -71,8 +70,9 @@ def test_guard_never_switches_where_staying_is_safe(switching_library):
     assert (gaits == setup.gait_index("trot")).all()
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "gaitlib.cli", *args], capture_output=True, text=True)
+_cli = gaitlib_quick
+"""In-process: these tests are about the guard's reports, not the process boundary (run, eval and benchmark each
+run in a fresh process in their own test files)."""
 
 
 def test_run_without_estimate_is_unguarded_and_says_so(switching_library, tmp_path):
