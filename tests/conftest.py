@@ -26,8 +26,8 @@ BACKENDS = [
 
 LONGEST_FILES = (
     "test_cluster.py", "test_user_library.py", "test_sim_backends.py", "test_cli_switching.py", "test_cli_train.py",
-    "test_gpu_check.py", "test_cli_transitions.py", "test_distributed.py", "test_guard.py", "test_steering.py",
-    "test_full_disk.py", "test_byte_flips.py", "test_packaging.py",
+    "test_gpu_check.py", "test_cli_transitions.py", "test_distributed.py", "test_full_disk.py",
+    "test_guard.py", "test_byte_flips.py", "test_packaging.py",
 )
 """The test files that take longest (``pytest --durations``), run first: pytest-xdist hands whole files to its
 workers in collection order, so a long file collected last keeps one core busy while the other idles."""

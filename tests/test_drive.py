@@ -177,8 +177,8 @@ def test_a_drive_is_guarded_as_a_run_is(switching_library, tmp_path) -> None:
     (tmp_path / "states.h5").write_bytes(b"forced")
     save_survival(library, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), data=tmp_path / "states.h5")
     commands = _write(tmp_path / "c.csv", HEADER + "0,1.45,0,0\n0.5,1.45,0,0\n")
-    result = gaitlib("drive", "--commands", str(commands), "--library", str(library.root), "--plot",
-                     str(tmp_path / "d.png"), "--backend", "mujoco", "--guard-margin", "0", "--json")
+    result = gaitlib_quick("drive", "--commands", str(commands), "--library", str(library.root), "--plot",
+                           str(tmp_path / "d.png"), "--backend", "mujoco", "--guard-margin", "0", "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     assert [row["skill"] for row in report["commands"]] == ["trot"]

@@ -4,8 +4,6 @@ library's switching folder, and the one-line refusals."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,6 +13,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
 from gaitlib.strategies.survival import check_guard, fit_survival, load_survival, save_survival
+from tests.cli_runner import gaitlib_quick
 from tests.conftest import copy_library
 
 SMALL = {"num_worlds": 6, "settle_s": 0.4, "after_s": 0.6, "record_from_s": 0.3, "impulse_max_ns": 60.0}
@@ -61,8 +60,8 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
     save_survival(library, estimate, data=path)
     loaded = load_survival(library, setup.gaits)
     assert (loaded.horizon_s, loaded.margin, loaded.platt) == (estimate.horizon_s, estimate.margin, estimate.platt)
-    shown = subprocess.run([sys.executable, "-m", "gaitlib.cli", "library", "--library", str(library.root), "--json"],
-                           capture_output=True, text=True, check=True)
+    shown = gaitlib_quick("library", "--library", str(library.root), "--json")
+    assert shown.returncode == 0, shown.stderr
     assert json.loads(shown.stdout)["survival"]["state"] == "current"
     stale = dict(identities) | {setup.gaits[0]: "0" * 64}
     estimate.identities = stale
@@ -76,7 +75,6 @@ def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
     for bad in ({"horizon_s": 0.0}, {"horizon_s": 6.0}, {"margin": 1.0}, {"margin": -0.1}):
         with pytest.raises(GaitlibError, match=r"horizon|margin"):
             check_guard(**bad)
-    run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "fit", str(path), "--library",
-                          str(tmp_path / "nothing"), "--margin", "1.5"], capture_output=True, text=True)
+    run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--margin", "1.5")
     assert run.returncode == 2 and run.stderr.count("\n") == 1 and "margin" in run.stderr
     assert not (tmp_path / "nothing").exists()
