@@ -132,7 +132,8 @@ def _symlinked(data: Path, other: Path) -> Path:
 
 
 def _index_again(data: Path, other: Path) -> Path:
-    """A copy whose index is written anew (another creation time and one more collection run in its `sessions` list, the same parts)."""
+    """A copy whose index is written anew (another creation time, one more collection run in its ``sessions`` list,
+    the same parts)."""
     _linked(data, other, how=shutil.copy2)
     index, _ = schema.scan(other)
     schema.write_index(other, dataclasses.replace(
