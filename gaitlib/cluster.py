@@ -119,6 +119,10 @@ def _run_here(tasks: Iterable[Any], spec: WorkerSpec) -> Iterator[tuple[Any, Any
         getattr(worker, "close", lambda: None)()
 
 
+_NO_TASK = object()
+"""What an empty task list yields first."""
+
+
 class _Host:
     """The Ray actor: builds one worker and runs tasks on it."""
 
@@ -141,6 +145,11 @@ class _Host:
 
 def _run_on_ray(tasks: Iterable[Any], spec: WorkerSpec, cluster: ClusterConfig) -> Iterator[tuple[Any, Any]]:
     ray = require_ray()
+    tasks = iter(tasks)
+    first = next(tasks, _NO_TASK)
+    if first is _NO_TASK:  # nothing to do (a finished run resumed): no Ray started, no worker built
+        return
+    tasks = itertools.chain([first], tasks)
     started = not ray.is_initialized()
     if started:
         try:

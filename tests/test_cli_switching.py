@@ -1,4 +1,5 @@
-"""``gaitlib run`` and ``gaitlib benchmark`` end to end, on a tiny library and on the shipped one."""
+"""``gaitlib run`` and ``gaitlib benchmark`` end to end on a tiny library (the README's main job on the shipped library:
+test_user_library.py, in a fresh clone, and test_packaging.py, from the installed wheel)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,6 @@ from pathlib import Path
 
 import pytest
 from cli_runner import gaitlib, gaitlib_quick
-
-SHIPPED = Path(__file__).resolve().parents[1] / "library"
 
 
 def _strict(text: str) -> dict:
@@ -145,21 +144,8 @@ def test_benchmark_rejects_a_bad_magnitude_range(switching_library) -> None:
     assert result.returncode == 2 and "--magnitudes" in result.stderr.strip().splitlines()[0]
 
 
-def test_the_readme_main_job_runs_on_the_shipped_library(tmp_path) -> None:
-    assert (SHIPPED / "switching" / "net.pt").is_file() and (SHIPPED / "switching" / "tmt.json").is_file()
-    plot = tmp_path / "run.png"
-    result = gaitlib("run", "--from", "trot", "--to", "stand", "--plot", str(plot), "--json")
-    assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)
-    # Requested at 2 s; the switch comes within the 2 s deadline. Whether the robot stays up is the run's result: a
-    # trot-to-stand switch at the paper's speed fails at some moments (docs/results.md), so it is reported, not fixed.
-    (switch,) = report["switches"]
-    assert 2.0 - 1e-6 <= switch["switch_s"] <= 4.0 + 1e-6 and isinstance(report["stayed_up"], bool)
-    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
 def test_throughput_collect_reports_a_ratio_against_the_environment_step(switching_library) -> None:
-    result = gaitlib(
+    result = gaitlib_quick(
         "throughput", "collect", "--worlds", "4", "--seconds", "1", "--chunk", "4", "--library", str(switching_library),
         "--json",
     )

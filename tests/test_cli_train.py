@@ -82,7 +82,7 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
     saved = torch.load(latest, weights_only=False)
     done = saved["iter"]
     assert done >= 1 and saved["infos"]["samples"] == done * 32 and not (library / "stand").exists()
-    resumed = gaitlib("train", "stand", "--preset", "tiny", "--iterations", str(done + 1), "--resume",
-                      "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs))
+    resumed = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", str(done + 1), "--resume",
+                            "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs))
     assert resumed.returncode == 0, resumed.stderr
     assert f"after {done + 1} iterations, {(done + 1) * 32:,} samples" in resumed.stderr

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import torch
+from cli_runner import gaitlib_quick
 
 from gaitlib.library import Library
 
@@ -38,10 +39,8 @@ def test_two_ranks_train_one_policy_stop_together_and_rank_0_writes_it(tmp_path)
     assert meta["training"]["samples"] == 2 * 4 * 8 * 1  # ranks x worlds x steps x iterations
     assert sorted(p.name for p in (tmp_path / "runs" / "two" / "checkpoints").iterdir()) == ["latest.pt"]
 
-    one = subprocess.run(
-        [sys.executable, "-m", "gaitlib.cli", *TRAIN, "--iterations", "1", "--library", "one", "--run-dir", "r1"],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path,
-    )
+    one = gaitlib_quick(*TRAIN, "--iterations", "1", "--library", str(tmp_path / "one"), "--run-dir",
+                        str(tmp_path / "r1"))
     assert one.returncode == 0, one.stderr[-3000:]
     single = Library(tmp_path / "one").entry("stand").policy.actor.state_dict()
     pair = Library(tmp_path / "two").entry("stand").policy.actor.state_dict()

@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 import pytest
-from cli_runner import gaitlib, gaitlib_quick
+from cli_runner import gaitlib_quick
 from conftest import copy_library
 
 from gaitlib.atomic import command_line, release_lock, take_lock
@@ -57,8 +57,9 @@ def test_writing_the_shipped_library_is_refused_in_one_line_before_any_work(comm
 def test_fit_writes_into_your_own_library_by_default_and_leaves_the_shipped_one_alone(own_cwd) -> None:
     before = tree_sha256(SHIPPED)
     data = own_cwd / "t.h5"
-    collected = gaitlib("collect", "--library", str(SHIPPED), "--pairs", "trot-stand,stand-trot", "--samples", "32",
-                        "--worlds", "16", "--push-max", "1500", "--backend", "mujoco", "--out", str(data))
+    collected = gaitlib_quick("collect", "--library", str(SHIPPED), "--pairs", "trot-stand,stand-trot", "--samples",
+                              "32", "--worlds", "16", "--horizon", "1.0", "--push-max", "1500", "--backend", "mujoco",
+                              "--out", str(data))
     assert collected.returncode == 0, collected.stderr
     fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "1", "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
@@ -100,8 +101,8 @@ def test_a_measurement_of_other_switching_models_is_not_resumed_or_reused(switch
     from gaitlib.transitions import read
 
     data = tmp_path / "t.h5"
-    collected = gaitlib("collect", "--library", str(library.root), "--samples", "8", "--worlds", "4",
-                        "--backend", "mujoco", "--out", str(data))
+    collected = gaitlib_quick("collect", "--library", str(library.root), "--samples", "8", "--worlds", "4",
+                              "--horizon", "1.0", "--backend", "mujoco", "--out", str(data))
     assert collected.returncode == 0, collected.stderr
     fit_library(library, read(data), sources=[data], epochs=1, seed=7, min_per_label=0)  # other switching models
     again = gaitlib_quick(*args)
