@@ -12,7 +12,7 @@ from cli_runner import gaitlib, gaitlib_quick
 
 def test_train_then_eval_json(tmp_path) -> None:
     library, runs = tmp_path / "library", str(tmp_path / "runs")
-    trained = gaitlib(
+    trained = gaitlib_quick(  # in this process: the training runs in a fresh one in the Ctrl-C test below
         "train", "stand", "--preset", "tiny", "--iterations", "2", "--seed", "3", "--eval-episodes", "2",
         "--library", str(library), "--run-dir", runs,
     )
