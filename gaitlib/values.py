@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from gaitlib.errors import GaitlibError
 
-__all__ = ["IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "number_text", "parse_values"]
+__all__ = ["GUARD_HORIZON_S", "IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "number_text", "parse_values"]
 
 MAX_MAGNITUDES = 1000
 """Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
@@ -90,3 +90,6 @@ def parse_values(text: str, *, option: str, bounds: Bounds, example: str) -> tup
     if len(set(values)) != len(values):
         raise OptionError(f"{option} '{text}': a value is given twice")
     return values
+
+GUARD_HORIZON_S = Bounds(low=0, high=5, unit="s", low_open=True)
+"""How far ahead the guard's survival estimate may look (five seconds: far beyond a shove's consequences)."""

@@ -63,7 +63,7 @@ mkdir {tmp_path}/kept && cp -r "$DISK/t.h5" "$DISK/t.h5.parts" {tmp_path}/kept/
     _one_line(done.stderr, f"gaitlib: error: could not write {tmp_path}/disk/t.h5")
     assert done.stderr.splitlines()[-1].endswith(": no space left on device; the 4 samples committed before are "
                                                   "kept: free space and rerun to resume")
-    assert validate(tmp_path / "kept" / "t.h5").count == 4  # every committed sample reads back (validate checks each part)
+    assert validate(tmp_path / "kept" / "t.h5").count == 4  # every committed sample reads back (each part checked)
 
 
 def test_fit_on_a_full_disk_leaves_the_models_as_they_were_in_one_line(switching_library, tmp_path) -> None:

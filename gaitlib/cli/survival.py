@@ -10,6 +10,7 @@ import typer
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.defaults import Falls
+from gaitlib.values import GUARD_HORIZON_S, parse_values
 
 __all__ = ["app", "guarded_curve"]
 
@@ -51,7 +52,8 @@ def record_command(
 @app.command("fit")
 def fit_command(
     data: Path = typer.Argument(..., help="A state file of gaitlib survival record."),
-    horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]."),
+    horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]: "
+                                 "START:STOP:STEP or a list."),
     margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
     inputs: str = typer.Option("latent,phase", "--inputs", help="Inputs besides the gait: latent, phase, value (the "
                                "critic's, privileged: not exportable to a robot), explicit."),
@@ -67,17 +69,11 @@ def fit_command(
     """Fit the survival estimate on recorded states, calibrate it, choose the guard's horizon and margin on a
     held-out split, write it into the library's switching folder and report it."""
     from gaitlib.collection.survival import read_survival_states
-    from gaitlib.errors import GaitlibError
     from gaitlib.library import Library
     from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
     from gaitlib.strategies.survival import check_guard, fit_survival, save_survival
 
-    try:
-        chosen = tuple(float(h) for h in horizons.split(","))
-    except ValueError:
-        raise GaitlibError(f"--horizons takes seconds separated by commas, got '{horizons}'") from None
-    for h in chosen:
-        check_guard(horizon_s=h)
+    chosen = parse_values(horizons, option="--horizons", bounds=GUARD_HORIZON_S, example="0.5:1.5:0.5")
     check_guard(margin=margin)
     target, copy_from = writing_target(library)
     check_writable(target, replace=replace, command="gaitlib survival fit", what="the survival estimate")

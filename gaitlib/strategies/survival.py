@@ -30,6 +30,7 @@ from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.library.layout import check_identities, is_shipped
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import platt
+from gaitlib.values import GUARD_HORIZON_S
 
 __all__ = [
     "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "SurvivalNet",
@@ -56,8 +57,8 @@ _SPLIT = (0.6, 0.2)
 
 def check_guard(*, horizon_s: float | None = None, margin: float | None = None) -> None:
     """Refuse, in one line, a horizon outside (0, 5] s or a margin outside [0, 1)."""
-    if horizon_s is not None and not 0 < horizon_s <= 5:
-        raise GaitlibError(f"the guard's horizon ({horizon_s:g} s) must lie in (0, 5] s")
+    if horizon_s is not None and not 0 < horizon_s <= GUARD_HORIZON_S.high:
+        raise GaitlibError(f"the guard's horizon ({horizon_s:g} s) must lie in {GUARD_HORIZON_S.describe()}")
     if margin is not None and not 0 <= margin < 1:
         raise GaitlibError(f"the guard's margin ({margin:g}) must lie in [0, 1)")
 
