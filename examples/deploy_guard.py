@@ -1,7 +1,7 @@
 """The guard's decision on a robot, from the folder ``gaitlib survival export`` writes: numpy and onnxruntime only.
 
-Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, and the reference
-phase; it answers whether to switch now, to which gait and destination phase.
+Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, the reference phase
+and the time since the robot started, s; it answers whether to switch now, to which gait and destination phase.
 """
 
 import json
@@ -51,8 +51,10 @@ class RobotGuard:
             offers[dest] = (float(p[best]), float(self.candidates[best]))
         return float(stay), offers
 
-    def decide(self, gait, obs, phase):
+    def decide(self, gait, obs, phase, time_s):
         """(gait, destination phase) to switch to at once, or None to keep the gait."""
+        if time_s < self.spec["armed_from_s"]:  # still settling from the start: states the estimate never saw
+            return None
         stay, offers = self.read(gait, obs, phase)
         dest = max(offers, key=lambda g: offers[g][0])
         if offers[dest][0] - stay > self.spec["margin"]:

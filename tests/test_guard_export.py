@@ -50,6 +50,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     library = copy_library(Library(switching_library), tmp_path / "library")
     setup = load_switching(library.root)
     estimate = _estimate(setup, ("latent", "phase"), margin=0.0)
+    estimate.info["armed_from_s"] = 2 / 30  # the first two control steps of an episode: no catch on either side
     (tmp_path / "states.h5").write_bytes(b"random")
     save_survival(library, estimate, data=tmp_path / "states.h5")
     run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "export", "--out", str(tmp_path / "guard"),
@@ -65,10 +66,13 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
         env = setup.make_env(sim, EnvConfig(episode_seconds=5.0), seed=1)
         env.reset_worlds(torch.arange(3), gait=torch.tensor([0, 1, 1]))
         ctl = setup.controller(env, "net-lookahead")
-        for _ in range(4):
+        fired = []
+        for step in range(4):
             ids = torch.arange(3)
             reading = guard.read(env, ctl.policies, ids, ctl.candidates)
             fires = guard.fires(reading)
+            fired.append(bool(fires.any()))
+            assert not (fires & ~reading.armed).any() and (step >= 2 or not reading.armed.any())  # (a fall restarts)
             obs = env.get_observations()["policy"].cpu().numpy()
             for w in range(3):
                 gait = setup.gaits[int(env.gait[w])]
@@ -78,7 +82,8 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
                     n = setup.gait_index(dest)
                     assert offer == pytest.approx(float(reading.offer[w, n]), abs=1e-4)
                     assert phase == pytest.approx(float(reading.phase[w, n]))
-                decided = robot.decide(gait, obs[w], float(env.phase[w]))
+                time_s = float(env.episode_length_buf[w]) * env.dt
+                decided = robot.decide(gait, obs[w], float(env.phase[w]), time_s)
                 assert (decided is not None) == bool(fires[w])
                 if decided is not None:
                     n = int(reading.best()[1][w])
@@ -86,6 +91,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
             ctl.step()
     finally:
         sim.close()
+    assert fired[:2] == [False, False] and any(fired[2:])  # unarmed, then catches (a margin of 0)
 
 
 def test_an_estimate_reading_the_critic_is_refused(switching_library, tmp_path):

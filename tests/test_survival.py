@@ -81,6 +81,7 @@ def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
     for horizons, says in (("0,1", "--horizons must be a finite number in (0, 5] s, got 0"),
                            ("0.5,x", "--horizons '0.5,x': give START:STOP:STEP (e.g. 0.5:1.5:0.5) or a list"),
                            ("1,1", "--horizons '1,1': a value is given twice")):
-        run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--horizons", horizons)
+        run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--horizons",
+                            horizons)
         assert run.returncode == 2 and run.stderr == f"gaitlib: error: {says}\n" and run.stdout == ""
     assert not (tmp_path / "nothing").exists()

@@ -2,7 +2,9 @@
 keeps its gait (the survival estimate, :mod:`gaitlib.strategies.survival`) is compared with what switching now
 offers (the calibrated transition-net at each other gait's best destination phase,
 :meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`); where the best offer beats staying by more than
-the margin, the world switches there at once (a *catch*), without waiting for a better phase. After a catch the
+the margin, the world switches there at once (a *catch*), without waiting for a better phase. The guard acts from
+the earliest moment of an episode its estimate saw a state of (:attr:`SurvivalEstimate.armed_from_s`, the
+recording's first; before it the robot settles from its start, states the estimate never learnt). After a catch the
 world holds the gait it was caught into for the estimate's horizon (it is not caught again meanwhile: the net's
 offer already counted the time after that switch), then returns to the requested gait through the
 normal switch (the controller's strategy), which is when it is safe by that strategy's measure.
@@ -57,6 +59,8 @@ class GuardReading:
     """(k, G) that phase, cycles."""
     latent: torch.Tensor
     """(k, L) the actors' latents psi_m."""
+    armed: torch.Tensor
+    """(k,) bool: the episode has run at least the estimate's :attr:`~SurvivalEstimate.armed_from_s`."""
 
     def best(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(k,) the best offer and (k,) its gait."""
@@ -91,12 +95,13 @@ class Guard:
                                      explicit=explicit)
         stay = self.estimate.probability(features, gait).to(env.device)
         offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
-        return GuardReading(stay, offer.to(env.device), best_phase.to(env.device), latent)
+        armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6
+        return GuardReading(stay, offer.to(env.device), best_phase.to(env.device), latent, armed)
 
     def fires(self, reading: GuardReading) -> torch.Tensor:
-        """(k,) bool: the best offer beats staying by more than the margin."""
+        """(k,) bool: armed, and the best offer beats staying by more than the margin."""
         best, _ = reading.best()
-        return best - reading.stay > self.margin
+        return (best - reading.stay > self.margin) & reading.armed
 
 
 def catch_summary(catches: list[CatchEvent], gaits: tuple[str, ...], dt: float) -> dict:

@@ -9,7 +9,8 @@ Written into one folder:
   to its logit (standardization included);
 * ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
   to its logit;
-* ``guard.json``: the gaits, the policies' identities, the estimate's horizon, margin and Platt (a, b) per gait
+* ``guard.json``: the gaits, the policies' identities, the estimate's horizon, margin, the time from an episode's
+  start before which it does not act (``armed_from_s``, s) and Platt (a, b) per gait
   (``sigmoid(a * logit + b)``), the net's calibration per ordered pair (``sigmoid(a * logit(clip(sigmoid(z),
   1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
 
@@ -35,7 +36,7 @@ __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
 
 DEPLOYABLE_INPUTS = ("latent", "phase")
 """The only survival inputs a robot-side loop computes from its own observations."""
-_FORMAT = {"format": "gaitlib.guard_export", "format_version": 1}
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 2}  # 2: armed_from_s
 
 
 class _Latent(torch.nn.Module):
@@ -92,9 +93,11 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "library_identities": estimate.identities,
         "horizon_s": estimate.horizon_s,
         "margin": estimate.margin,
+        "armed_from_s": estimate.armed_from_s,
         "survival_platt": {gaits[k]: list(ab) for k, ab in estimate.platt.items()},
         "net_calibration": {f"{gaits[m]}-{gaits[n]}": list(ab) for (m, n), ab in calibration.pairs.items()},
         "candidates": phase_grid().tolist(),
-        "rule": "catch into the gait whose best calibrated offer beats the calibrated survival estimate by more than "
-                "the margin, at once; then hold it for horizon_s before the requested gait is switched to again",
+        "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer beats the "
+                "calibrated survival estimate by more than the margin, at once; then hold it for horizon_s before the "
+                "requested gait is switched to again",
     }, checksum=True)

@@ -116,6 +116,12 @@ class SurvivalEstimate:
     info: dict = field(default_factory=dict)
     """How it was fitted and chosen, its reliability table, lead times and false alarms (JSON-ready)."""
 
+    @property
+    def armed_from_s(self) -> float:
+        """The earliest time of an episode the estimate saw a state of (its recording's first), s: before it, the
+        guard does not act (0 for an estimate fitted before this was recorded)."""
+        return float(self.info.get("armed_from_s", 0.0))
+
     @torch.inference_mode()
     def probability(self, features: torch.Tensor, gait: torch.Tensor) -> torch.Tensor:
         """(k,) calibrated probability of staying up ``horizon_s`` keeping the gait, from :func:`survival_features`
@@ -261,6 +267,7 @@ def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identit
                 "the horizon warning before the most falls; Platt scaling per gait on the calibration split (20%)",
         "states": len(data["gait"]), "episodes": len(np.unique(data["episode"])), "epochs": epochs,
         "seed": seed, "dt": dt,
+        "armed_from_s": round(float(data["time_s"].min()), 6),
     }
     return estimate
 
