@@ -14,6 +14,7 @@ a catch before the shove is a false catch) and how long until the measured gait 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -23,11 +24,11 @@ from gaitlib.envs import EnvConfig
 from gaitlib.envs.randomization import PushConfig
 from gaitlib.envs.terminations import FallTally, TerminationConfig
 from gaitlib.evaluation import AFTER_S, SETTLE_S, FallRecord, PushPoint, SinglePush
-from gaitlib.meta.guard import Guard
+from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.sim import make_backend
 
-__all__ = ["guarded_episodes", "guarded_push_curve"]
+__all__ = ["GuardedRollout", "guarded_episodes", "guarded_push_curve", "guarded_push_rollout"]
 
 
 def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None, impulses: Sequence[float],
@@ -45,6 +46,33 @@ def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None,
 
 def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, episodes: int, duration_s: float,
            cycle_s: float, backend: str, seed: int) -> PushPoint:
+    run = guarded_push_rollout(setup, g, guard, cfg, impulse=impulse, episodes=episodes, duration_s=duration_s,
+                               cycle_s=cycle_s, backend=backend, seed=seed)
+    counted = FallRecord.of(run.tally, dt=run.dt, falls=cfg.termination.falls)
+    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=run.push.force_n,
+                     by_sector=run.push.by_sector(run.tally.fell),
+                     guard=_guard_summary(guard, run.catches, run.push.start.cpu(), setup.gaits, run.dt,
+                                          run.measured_share))
+
+
+@dataclass(frozen=True)
+class GuardedRollout:
+    """One rollout of a shove point: per-world falls and touches, the shoves, the catches."""
+
+    tally: FallTally
+    push: SinglePush
+    catches: list[CatchEvent]
+    """The catches of worlds still up (a fallen world's are not counted)."""
+    measured_share: float
+    """Share of the worlds' time up that the measured gait ran."""
+    dt: float
+    """Control period, s."""
+
+
+def guarded_push_rollout(setup: SwitchingSetup, g: int, guard: Guard | None, cfg: EnvConfig, *, impulse: float,
+                         episodes: int, duration_s: float, cycle_s: float, backend: str, seed: int) -> GuardedRollout:
+    """``episodes`` worlds of gait ``g`` each shoved once (:class:`SinglePush` of ``impulse`` N s, drawn from
+    ``seed``) on ``setup``'s meta-controller, guarded by ``guard`` (``None``: unguarded), run to ``cfg``'s end."""
     sim = make_backend(backend, num_worlds=episodes)
     try:
         env = setup.make_env(sim, cfg, seed=seed)
@@ -67,11 +95,7 @@ def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, e
                 alive &= ~result.fell & (env.episode_length_buf > 0)  # a time-out resets the world too
     finally:
         sim.close()
-    counted = FallRecord.of(tally, dt=dt, falls=cfg.termination.falls)
-    return PushPoint(**counted.counted(), impulse_ns=impulse, force_n=push.force_n,
-                     by_sector=push.by_sector(tally.fell),
-                     guard=_guard_summary(guard, catches, push.start.cpu(), setup.gaits, dt,
-                                          measured_steps / max(1, steps)))
+    return GuardedRollout(tally, push, catches, measured_steps / max(1, steps), dt)
 
 
 def _guard_summary(guard: Guard | None, catches: list, start: torch.Tensor, gaits: tuple[str, ...], dt: float,
