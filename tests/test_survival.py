@@ -85,3 +85,33 @@ def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
                             horizons)
         assert run.returncode == 2 and run.stderr == f"gaitlib: error: {says}\n" and run.stdout == ""
     assert not (tmp_path / "nothing").exists()
+
+
+def test_the_imu_input_is_recorded_and_fitted_and_an_older_file_is_refused_for_it(recorded, tmp_path):
+    import h5py
+
+    path, setup, _, data = recorded
+    assert data["imu"].shape == (len(data["gait"]), 3) and np.isfinite(data["imu"]).all()
+    shoved = (data["time_s"] >= data["shove_s"]) & (data["time_s"] < data["shove_s"] + 0.1) & (data["impulse_ns"] > 40)
+    calm = data["impulse_ns"] == 0
+    # A shove of 40-60 N s over 0.1 s is 32-48 m/s^2 on the A1's 12.5 kg: the trunk reads far more than when calm.
+    assert np.median(np.linalg.norm(data["imu"][shoved, :2], axis=1)) > 3 * np.median(
+        np.linalg.norm(data["imu"][calm, :2], axis=1))
+    identities = Library(setup.resources.library.root).identities(setup.gaits)
+    dt = read_survival_states(path)[0]["dt"]
+    estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, inputs=("latent", "phase", "imu"),
+                            horizons_s=(0.2,), epochs=2)
+    assert estimate.inputs == ("latent", "phase", "imu") and estimate.armed_from_s == pytest.approx(0.3)
+    older = tmp_path / "older.h5"  # as recorded before the column existed
+    with h5py.File(path, "r") as source, h5py.File(older, "w") as copy:
+        copy.attrs["header"] = source.attrs["header"]
+        for name in source:
+            if name != "imu":
+                source.copy(name, copy)
+    _, read = read_survival_states(older)
+    assert "imu" not in read
+    with pytest.raises(GaitlibError, match=r"^these survival states hold no imu \(recorded before it existed\)"):
+        fit_survival(read, gaits=setup.gaits, identities=identities, dt=dt, inputs=("latent", "imu"), epochs=2)
+    with pytest.raises(GaitlibError, match="recorded before its imu column existed; record into a new file"):
+        record_survival(older, setup, SurvivalRecording(episodes=18, **SMALL))
+

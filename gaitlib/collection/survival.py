@@ -9,7 +9,8 @@ are counted on), as ``gaitlib eval --impulses`` shoves; the episode runs ``after
 termination before the end by the definition ``falls`` (heading drift is no fall, as in ``eval --impulses``).
 
 Every control step from ``record_from_s`` on, each world that is up and keeps its gait from then on records: its
-gait, phase, actor latent psi_m, critic value, explicit state, and what switching now would offer (the calibrated
+gait, phase, actor latent psi_m, critic value, explicit state, trunk acceleration (what an IMU reads,
+:attr:`~gaitlib.envs.ImitationEnv.trunk_acceleration`), and what switching now would offer (the calibrated
 transition-net's best destination phase for every other gait, :meth:`LookaheadStrategy.offers`), with the time, the
 shove's start and impulse, the episode's end and the time of its fall (inf: none).
 
@@ -47,8 +48,11 @@ from gaitlib.transitions.explicit import explicit_state
 __all__ = ["SurvivalRecording", "read_survival_states", "record_survival"]
 
 _FORMAT = "gaitlib.survival_states"
-_COLUMNS = ("episode", "gait", "phase", "latent", "value", "explicit", "offer", "time_s", "shove_s", "impulse_ns",
-            "end_s", "fall_s", "switched")
+_COLUMNS = ("episode", "gait", "phase", "latent", "value", "explicit", "imu", "offer", "time_s", "shove_s",
+            "impulse_ns", "end_s", "fall_s", "switched")
+_ADDED = ("imu",)
+"""Columns that files recorded before them lack: such a file is read (an estimate needing them is refused on it),
+not resumed."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -103,6 +107,9 @@ def record_survival(path: Path, setup: SwitchingSetup, config: SurvivalRecording
         found, data = _read(Path(path))
         if {k: found.get(k) for k in header} != header:
             raise GaitlibError(f"{path} was recorded with another library or other settings; record into a new file")
+        if missing := [c for c in _ADDED if c not in data]:
+            raise GaitlibError(f"{path} was recorded before its {', '.join(missing)} column existed; record into a new "
+                               "file")
     batches = math.ceil(config.episodes / config.num_worlds)
     done = len(np.unique(data["episode"])) if data else 0
     for b in range(math.ceil(done / config.num_worlds), batches):
@@ -199,6 +206,7 @@ def _states(env, policies, scorer, candidates, ids: torch.Tensor, obs, step: int
         "latent": latent.cpu().numpy().astype(np.float32),
         "value": per_gait(policies, gait, obs, method="value").reshape(-1).cpu().numpy().astype(np.float32),
         "explicit": explicit_state(obs["policy"]).cpu().numpy().astype(np.float32),
+        "imu": env.trunk_acceleration[ids].cpu().numpy().astype(np.float32),
         "offer": offer.cpu().numpy().astype(np.float32), "time_s": np.full(len(ids), step * env.dt),
     }
 
@@ -220,7 +228,7 @@ def _read(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
     try:
         with h5py.File(path, "r") as f:
             header = json.loads(f.attrs["header"])
-            data = {name: f[name][()] for name in _COLUMNS}
+            data = {name: f[name][()] for name in _COLUMNS if name in f or name not in _ADDED}
     except Exception as error:  # h5py and json raise several unrelated types for a foreign file
         raise GaitlibError(f"{path} is not a recorded survival-state file ({type(error).__name__})") from error
     if header.get("format") != _FORMAT or len({len(v) for v in data.values()}) != 1:

@@ -37,7 +37,7 @@ from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, any_cause, fall_causes
 from gaitlib.gaits import ReferenceClip
-from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, yaw_of
+from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
 from gaitlib.sim import KinematicState, SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
@@ -120,6 +120,10 @@ class ImitationEnv(VecEnv):
         self._params = sample_world_parameters(cfg.randomization, n, self._gen)
         self._dynamics = torch.zeros(n, obs_fn.width(obs_fn.DYNAMICS), device=dev)  # what the critic sees
         self._state: SimState = backend.state()
+        self.trunk_acceleration = torch.zeros(n, 3, device=dev)
+        """(N, 3) the trunk's mean acceleration over the last control step, trunk frame, m/s^2, gravity left out:
+        what an IMU's accelerometer reads at the control rate once the attitude's gravity is taken away (0 just
+        after a reset). Read by the guard's survival estimate (its ``imu`` input), not by the policies."""
         self._terms = {term.name: torch.zeros(n, device=dev) for term in cfg.reward}
         self._obs: TensorDict | None = None
         self.reset_worlds(torch.arange(n, device=dev))
@@ -144,10 +148,12 @@ class ImitationEnv(VecEnv):
         changed = self._pushes.advance()
         if len(changed):
             self.backend.set_trunk_force(changed, self._pushes.force[changed].to(self.device))
+        before = self._state.root_lin_vel.clone()
         diverged = self.backend.step().to(self.device)
         cycle_started = self.reference.advance(self.dt)
         self.episode_length_buf += 1
         self._state = state = self.backend.state()
+        self.trunk_acceleration = quat_rotate_inverse(state.root_quat, (state.root_lin_vel - before) / self.dt)
         if cfg.cycle_sync and bool(cycle_started.any()):
             synced = cycle_started.nonzero().squeeze(1)
             self.reference.sync_position(synced, state.root_pos[synced])
@@ -261,6 +267,7 @@ class ImitationEnv(VecEnv):
         self._pushes.reset(world_ids.cpu())
         self.episode_length_buf[world_ids] = 0
         self._action[world_ids] = 0.0
+        self.trunk_acceleration[world_ids] = 0.0
         self._state = self.backend.state()
         reading = self._clean_frame()[world_ids]
         self._last_reading[world_ids] = reading

@@ -91,8 +91,9 @@ class Guard:
         needs = self.estimate.inputs
         value = per_gait(policies, gait, obs, method="value").reshape(-1) if "value" in needs else phase
         explicit = explicit_state(obs["policy"]) if "explicit" in needs else None
+        imu = env.trunk_acceleration[ids] if "imu" in needs else None
         features = survival_features(needs, len(env.clips), gait=gait, latent=latent, phase=phase, value=value,
-                                     explicit=explicit)
+                                     explicit=explicit, imu=imu)
         stay = self.estimate.probability(features, gait).to(env.device)
         offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
         armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6

@@ -40,9 +40,10 @@ __all__ = [
 
 SURVIVAL_FILE = Library.SURVIVAL
 """The estimate's name in the library's switching folder."""
-INPUTS = ("latent", "phase", "value", "explicit")
+INPUTS = ("latent", "phase", "value", "explicit", "imu")
 """Inputs the estimate may take, besides the running gait (one-hot): psi_m, the phase as (sin, cos), the critic's
-value, the explicit state (66)."""
+value, the explicit state (66), the trunk's acceleration in its own frame (3, m/s^2, gravity left out: an IMU's
+accelerometer; :attr:`ImitationEnv.trunk_acceleration`)."""
 HORIZONS_S = (0.5, 1.0, 1.5)
 """Horizons tried by default, s."""
 MARGINS = tuple(round(0.05 * k, 2) for k in range(20))
@@ -64,14 +65,15 @@ def check_guard(*, horizon_s: float | None = None, margin: float | None = None) 
 
 
 def survival_features(inputs: tuple[str, ...], gaits: int, *, gait: torch.Tensor, latent: torch.Tensor,
-                      phase: torch.Tensor, value: torch.Tensor, explicit: torch.Tensor | None = None) -> torch.Tensor:
+                      phase: torch.Tensor, value: torch.Tensor, explicit: torch.Tensor | None = None,
+                      imu: torch.Tensor | None = None) -> torch.Tensor:
     """(k, dim) float32 inputs: one-hot ``gait`` (k,) over ``gaits``, then each of ``inputs`` in :data:`INPUTS`
     order: ``latent`` (k, L), ``phase`` (k,) in cycles as (sin, cos) of 2 pi phase, ``value`` (k,), ``explicit``
-    (k, 66)."""
+    (k, 66), ``imu`` (k, 3) m/s^2."""
     parts = [torch.nn.functional.one_hot(gait.long(), gaits).float()]
     angle = 2 * torch.pi * phase.float()
     given = {"latent": latent.float(), "phase": torch.stack([torch.sin(angle), torch.cos(angle)], -1),
-             "value": value.float().reshape(-1, 1), "explicit": explicit}
+             "value": value.float().reshape(-1, 1), "explicit": explicit, "imu": imu}
     for name in INPUTS:
         if name in inputs:
             if given[name] is None:
@@ -154,9 +156,10 @@ def _split(data: dict[str, np.ndarray], seed: int) -> np.ndarray:
 
 
 def _features(data: dict[str, np.ndarray], inputs: tuple[str, ...], gaits: int, rows: np.ndarray) -> torch.Tensor:
-    t = {k: torch.from_numpy(data[k][rows]) for k in ("gait", "latent", "phase", "value", "explicit")}
+    columns = ("gait", "latent", "phase", "value", "explicit", "imu")
+    t = {k: torch.from_numpy(data[k][rows]) for k in columns if k in data}
     return survival_features(inputs, gaits, gait=t["gait"], latent=t["latent"], phase=t["phase"],
-                             value=t["value"], explicit=t["explicit"])
+                             value=t["value"], explicit=t["explicit"], imu=t.get("imu"))
 
 
 def _train(x: torch.Tensor, y: torch.Tensor, *, epochs: int, seed: int) -> SurvivalNet:
@@ -227,6 +230,9 @@ def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identit
     check_guard(margin=margin)
     if unknown := [i for i in inputs if i not in INPUTS]:
         raise GaitlibError(f"unknown survival input(s) {', '.join(unknown)} (known: {', '.join(INPUTS)})")
+    if absent := [i for i in inputs if i not in data]:
+        raise GaitlibError(f"these survival states hold no {', '.join(absent)} (recorded before it existed): record "
+                           "them again with gaitlib survival record")
     part = _split(data, seed)
     if not all((part == k).any() for k in range(3)):
         raise GaitlibError(f"{len(np.unique(data['episode']))} recorded episode(s) are too few to split three ways "
