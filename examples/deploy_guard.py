@@ -56,7 +56,8 @@ class RobotGuard:
         if time_s < self.spec["armed_from_s"]:  # still settling from the start: states the estimate never saw
             return None
         stay, offers = self.read(gait, obs, phase)
-        dest = max(offers, key=lambda g: offers[g][0])
+        into = self.spec["catch_into"]  # the catch table, or None: the gait offered most
+        dest = into[gait] if into else max(offers, key=lambda g: offers[g][0])
         if offers[dest][0] - stay > self.spec["margin"]:
             return dest, offers[dest][1]
         return None

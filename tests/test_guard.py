@@ -161,3 +161,30 @@ def test_eval_push_max_guarded_counts_catches_per_minute(switching_library, tmp_
     on = out["guarded"]
     assert len(on["guard"]["catches"]) >= 2 and on["catches_per_min"] > 0  # at 0 N each is a false catch
     assert on["guard"]["measured_gait_share"] < 1.0
+
+
+def test_the_catch_table_is_measured_on_training_draws_and_written_into_the_estimate(switching_library, tmp_path):
+    from gaitlib.strategies.survival import load_survival
+
+    library = copy_library(Library(switching_library), tmp_path / "library")
+    setup = load_switching(library.root)
+    (tmp_path / "states.h5").write_bytes(b"states")
+    save_survival(library, _forced(setup, {"trot": 0.5, "stand": 0.5}), data=tmp_path / "states.h5")
+    before = load_survival(library, setup.gaits)
+    assert before.catch_into is None
+    done = gaitlib_quick("survival", "catches", "--episodes", "4", "--impulse", "30", "--library", str(library.root),
+                         "--json")
+    assert done.returncode == 0, done.stderr
+    table = json.loads(done.stdout)
+    assert table["catch_into"] == {"stand": "trot", "trot": "stand"} and table["seed"] == 1000
+    assert all(set(row) == {"stay", other} and all(0 <= k <= 4 for k in row.values())
+               for (gait, row), other in zip(table["falls"].items(), ("trot", "stand"), strict=True))
+    after = load_survival(library, setup.gaits)
+    assert after.catch_into == {setup.gait_index("stand"): setup.gait_index("trot"),
+                                setup.gait_index("trot"): setup.gait_index("stand")}
+    assert (after.horizon_s, after.margin, after.platt) == (before.horizon_s, before.margin, before.platt)
+    assert after.info["catches"] == table
+    bare = copy_library(Library(switching_library), tmp_path / "bare")
+    refused = gaitlib_quick("survival", "catches", "--library", str(bare.root))
+    assert refused.returncode != 0 and refused.stderr.count("\n") == 1 and "no survival estimate" in refused.stderr
+

@@ -51,6 +51,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     setup = load_switching(library.root)
     estimate = _estimate(setup, ("latent", "phase"), margin=0.0)
     estimate.info["armed_from_s"] = 2 / 30  # the first two control steps of an episode: no catch on either side
+    estimate.info["catches"] = {"catch_into": {"stand": "trot", "trot": "stand"}}  # a catch table travels with it
     (tmp_path / "states.h5").write_bytes(b"random")
     save_survival(library, estimate, data=tmp_path / "states.h5")
     run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "export", "--out", str(tmp_path / "guard"),
@@ -60,6 +61,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     robot = module.RobotGuard(tmp_path / "guard")
+    assert robot.spec["catch_into"] == {"stand": "trot", "trot": "stand"} and robot.spec["armed_from_s"] == 2 / 30
     guard = Guard(estimate, get_strategy("net-lookahead", setup.resources))
     sim = make_backend("mujoco", num_worlds=3)
     try:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import typer
@@ -10,7 +11,7 @@ import typer
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.defaults import Falls
-from gaitlib.values import GUARD_HORIZON_S, parse_values
+from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, parse_values
 
 __all__ = ["app", "guarded_curve"]
 
@@ -102,6 +103,46 @@ def fit_command(
     alarms = report["false_alarms_per_min"]
     print(f"false alarms at 0 N: {'-' if alarms is None else f'{alarms:.3f}'} per minute "
           f"(over {report['unshoved_minutes']:.1f} unshoved minutes)")
+
+
+@app.command("catches")
+def catches_command(
+    episodes: int = bounded(256, "--episodes", help="Worlds per running gait and catch gait;", bounds=COUNT),
+    impulse: float = bounded(18.0, "--impulse", help="The shove;", bounds=IMPULSE_NS),
+    delay: int = bounded(2, "--delay", help="Control steps from the shove's start to the catch;",
+                         bounds=Bounds(low=0, high=30, whole=True)),
+    seed: int = bounded(1000, "--seed", help="Random seed (gait g's draws: seed + g), apart from evaluation seeds;",
+                        bounds=SEED),
+    backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
+    falls: str = falls_option(),
+    library: Path | None = _LIBRARY,
+    replace: bool = typer.Option(False, "--replace", help="Write into the shipped library (refused without it)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the table as one JSON object."),
+) -> None:
+    """Measure where the guard catches each gait to and write it into the library's survival estimate: every gait
+    shoved once, caught --delay steps later into each other gait in turn; the one that fell least is its catch
+    (docs/switching.md, "The guard")."""
+    from gaitlib.benchmark.catches import CatchTableConfig, fit_catch_table
+    from gaitlib.library.target import check_writable, library_writer
+    from gaitlib.meta import load_switching
+    from gaitlib.strategies.survival import save_catch_table
+
+    setup = load_switching(library)
+    guard = setup.guard()  # no survival estimate, or a stale one: one line, before any work
+    root = setup.resources.library.root
+    check_writable(root, replace=replace, command="gaitlib survival catches", what="the catch table")
+    config = CatchTableConfig(impulse_ns=impulse, episodes=episodes, delay_steps=delay, seed=seed, backend=backend,
+                              falls=falls)
+    table = fit_catch_table(setup, guard, config,
+                            progress=lambda d, t: print(f"{d}/{t} rollouts", file=sys.stderr, flush=True))
+    with library_writer(root, command="gaitlib survival catches"):
+        path = save_catch_table(setup.resources.library, table)
+    if as_json:
+        print(json_text(table))
+        return
+    print(f"{path}: catch into " + ", ".join(f"{g} -> {d}" for g, d in table["catch_into"].items()))
+    for gait, row in table["falls"].items():
+        print(f"  {gait}: falls of {episodes} at {impulse:g} N s: " + ", ".join(f"{d} {k}" for d, k in row.items()))
 
 
 @app.command("export")

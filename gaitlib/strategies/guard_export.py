@@ -10,7 +10,8 @@ Written into one folder:
 * ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
   to its logit;
 * ``guard.json``: the gaits, the policies' identities, the estimate's horizon, margin, the time from an episode's
-  start before which it does not act (``armed_from_s``, s) and Platt (a, b) per gait
+  start before which it does not act (``armed_from_s``, s), the catch table (``catch_into``: running gait -> the
+  gait it is caught into; null: the gait offered most) and Platt (a, b) per gait
   (``sigmoid(a * logit + b)``), the net's calibration per ordered pair (``sigmoid(a * logit(clip(sigmoid(z),
   1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
 
@@ -36,7 +37,7 @@ __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
 
 DEPLOYABLE_INPUTS = ("latent", "phase")
 """The only survival inputs a robot-side loop computes from its own observations."""
-_FORMAT = {"format": "gaitlib.guard_export", "format_version": 2}  # 2: armed_from_s
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 2}  # 2: armed_from_s, catch_into
 
 
 class _Latent(torch.nn.Module):
@@ -94,10 +95,12 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "horizon_s": estimate.horizon_s,
         "margin": estimate.margin,
         "armed_from_s": estimate.armed_from_s,
+        "catch_into": None if estimate.catch_into is None else {
+            gaits[g]: gaits[d] for g, d in estimate.catch_into.items()},
         "survival_platt": {gaits[k]: list(ab) for k, ab in estimate.platt.items()},
         "net_calibration": {f"{gaits[m]}-{gaits[n]}": list(ab) for (m, n), ab in calibration.pairs.items()},
         "candidates": phase_grid().tolist(),
-        "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer beats the "
-                "calibrated survival estimate by more than the margin, at once; then hold it for horizon_s before the "
-                "requested gait is switched to again",
+        "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
+                "catch_into table's gait where there is one) beats the calibrated survival estimate by more than the "
+                "margin, at once; then hold it for horizon_s before the requested gait is switched to again",
     }, checksum=True)

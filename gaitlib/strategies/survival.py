@@ -35,7 +35,7 @@ from gaitlib.values import GUARD_HORIZON_S
 __all__ = [
     "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "SurvivalNet",
     "check_guard",
-    "fit_survival", "load_survival", "save_survival", "survival_features",
+    "fit_survival", "load_survival", "save_catch_table", "save_survival", "survival_features",
 ]
 
 SURVIVAL_FILE = Library.SURVIVAL
@@ -123,6 +123,15 @@ class SurvivalEstimate:
         """The earliest time of an episode the estimate saw a state of (its recording's first), s: before it, the
         guard does not act (0 for an estimate fitted before this was recorded)."""
         return float(self.info.get("armed_from_s", 0.0))
+
+    @property
+    def catch_into(self) -> dict[int, int] | None:
+        """Running gait -> the gait the guard catches it into (the catch table, ``gaitlib survival catches``;
+        ``None``: none measured, the gait the transition-net offers most)."""
+        table = self.info.get("catches")
+        if table is None:
+            return None
+        return {self.gaits.index(g): self.gaits.index(d) for g, d in table["catch_into"].items()}
 
     @torch.inference_mode()
     def probability(self, features: torch.Tensor, gait: torch.Tensor) -> torch.Tensor:
@@ -288,6 +297,16 @@ def save_survival(library: Library, estimate: SurvivalEstimate, *, data: Path) -
         "data": {"path": str(data), "sha256": file_sha256(data)},
     }
     write_bytes(path, torch_bytes({"metadata": metadata, "state_dict": estimate.net.state_dict()}))
+    return path
+
+
+def save_catch_table(library: Library, table: dict) -> Path:
+    """Write the catch table (:func:`gaitlib.benchmark.catches.fit_catch_table`) into ``library``'s survival
+    estimate, atomically, the rest of it as it was (a refit of the estimate drops it: measure it again)."""
+    path = library.switching_dir / SURVIVAL_FILE
+    saved = torch.load(path, map_location="cpu", weights_only=True)
+    saved["metadata"]["info"]["catches"] = table
+    write_bytes(path, torch_bytes(saved))
     return path
 
 

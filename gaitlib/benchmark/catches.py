@@ -1,0 +1,117 @@
+"""Where the guard catches to: the catch table, chosen by rollouts on training draws.
+
+The transition-net scores switches from the states it was fitted on; two control steps into a shove, the running
+gait's latent has barely felt it, so the gait the net offers most is no better a catch than staying
+(``benchmarks/guard_oracle.py``). The catch table instead names, for each running gait, the gait to catch into: each
+gait of the library is shoved once (a :class:`~gaitlib.evaluation.SinglePush` of ``impulse`` N s on ``episodes``
+worlds) and every world switched at once, ``delay`` control steps after its shove starts, into each other gait at its
+best destination phase (the calibrated net's, as the guard switches), kept to the episode's end; the gait whose
+catches fell least is the table's, staying beside for reference. The draws are the caller's ``seed`` (training
+seeds: never an evaluation's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from gaitlib.benchmark.guarded_push import guarded_push_rollout
+from gaitlib.defaults import DEFAULT_FALLS, Falls
+from gaitlib.envs import EnvConfig
+from gaitlib.envs.randomization import PushConfig
+from gaitlib.envs.terminations import TerminationConfig
+from gaitlib.evaluation import AFTER_S, SETTLE_S, SinglePush
+from gaitlib.meta.guard import Guard, GuardReading
+from gaitlib.meta.setup import SwitchingSetup
+
+__all__ = ["CatchTableConfig", "TimedCatch", "fit_catch_table", "timed_catch_falls"]
+
+_NEVER_S = 1e6
+"""A hold no episode outlasts, s: a timed catch keeps its gait."""
+
+
+class TimedCatch(Guard):
+    """A guard that catches every world exactly ``delay`` control steps after its shove starts (the shove ``shove``
+    describes: :class:`SinglePush`'s arguments), into gait ``dest`` or, with ``dest`` ``None``, into the gait the
+    reading offers most; it never returns."""
+
+    def __init__(self, guard: Guard, *, delay: int, dest: int | None, shove: dict) -> None:
+        super().__init__(guard.estimate, guard.scorer, margin=guard.margin)
+        self.delay, self.dest, self.shove = delay, dest, shove
+        self._start: torch.Tensor | None = None
+        self._env = None
+
+    @property
+    def horizon_s(self) -> float:
+        return _NEVER_S
+
+    def read(self, env, policies, ids, candidates) -> GuardReading:
+        if self._env is not env:  # the rollout's own draws (SinglePush is drawn from its seed alone)
+            self._env, self._start = env, SinglePush(env, **self.shove).start
+        reading = super().read(env, policies, ids, candidates)
+        if self.dest is not None:
+            keep = torch.zeros_like(reading.offer, dtype=torch.bool)
+            keep[:, self.dest] = True
+            reading = GuardReading(reading.stay, reading.offer.masked_fill(~keep, float("nan")), reading.phase,
+                                   reading.latent, reading.armed)
+        return reading
+
+    def fires(self, reading: GuardReading) -> torch.Tensor:
+        best, _ = reading.best()
+        return (self._env.episode_length_buf == self._start + self.delay) & torch.isfinite(best)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CatchTableConfig:
+    """How the catch table is measured (module doc)."""
+
+    impulse_ns: float = 18.0
+    """The shove, N s (18 N s fells 15-41% of the shipped gaits' episodes: enough falls to rank the catches)."""
+    episodes: int = 256
+    """Worlds per running gait and catch gait."""
+    delay_steps: int = 2
+    """Control steps from the shove's start to the catch."""
+    seed: int = 1000
+    backend: str = "mujoco"
+    falls: Falls = DEFAULT_FALLS
+
+
+def timed_catch_falls(setup: SwitchingSetup, guard: Guard, gait: int, dest: int | None, *, impulse_ns: float,
+                      episodes: int, delay_steps: int, seed: int, backend: str,
+                      falls: Falls = DEFAULT_FALLS) -> torch.Tensor:
+    """(episodes,) bool: the worlds of ``gait`` that fell, shoved once with ``impulse_ns`` N s and caught
+    ``delay_steps`` control steps after into ``dest`` (``-1``: not caught, staying; ``None``: the gait ``guard``
+    offers most)."""
+    cycle_s, duration_s = 1.0 / setup.entries[gait].clip.phase_rate, 0.1
+    cfg = EnvConfig(episode_seconds=SETTLE_S + cycle_s + duration_s + AFTER_S, pushes=PushConfig(max_force=0.0),
+                    termination=TerminationConfig().counting(falls, heading=False))
+    shove = {"impulse": impulse_ns, "duration_s": duration_s, "cycle_s": cycle_s, "seed": seed}
+    catching = None if dest == -1 else TimedCatch(guard, delay=delay_steps, dest=dest, shove=shove)
+    run = guarded_push_rollout(setup, gait, catching, cfg, impulse=impulse_ns, episodes=episodes,
+                               duration_s=duration_s, cycle_s=cycle_s, backend=backend, seed=seed)
+    return run.tally.fell.cpu().bool()
+
+
+def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfig, *, progress=None) -> dict:
+    """The catch table of ``setup``'s gaits (module doc): JSON-ready, with every rollout's falls."""
+    gaits = setup.gaits
+    falls: dict[str, dict[str, int]] = {}
+    done, total = 0, len(gaits) ** 2
+    for g, name in enumerate(gaits):
+        row = {}
+        for d in [-1, *(d for d in range(len(gaits)) if d != g)]:
+            fell = timed_catch_falls(setup, guard, g, d, impulse_ns=config.impulse_ns, episodes=config.episodes,
+                                     delay_steps=config.delay_steps, seed=config.seed + g, backend=config.backend,
+                                     falls=config.falls)
+            row["stay" if d == -1 else gaits[d]] = int(fell.sum())
+            done += 1
+            if progress is not None:
+                progress(done, total)
+        falls[name] = row
+    return {
+        "catch_into": {name: min((d for d in row if d != "stay"), key=lambda d: (row[d], d))
+                       for name, row in falls.items()},
+        "falls": falls, "episodes": config.episodes, "impulse_ns": config.impulse_ns,
+        "delay_steps": config.delay_steps, "seed": config.seed, "falls_definition": Falls(config.falls).value,
+    }
