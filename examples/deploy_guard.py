@@ -53,11 +53,11 @@ class RobotGuard:
 
     def decide(self, gait, obs, phase, time_s):
         """(gait, destination phase) to switch to at once, or None to keep the gait."""
-        if time_s < self.spec["armed_from_s"]:  # still settling from the start: states the estimate never saw
-            return None
+        into = self.spec["catch_into"]  # the catch table (a gait it lacks is never caught), or None
+        if time_s < self.spec["armed_from_s"] or (into is not None and gait not in into):
+            return None  # still settling from the start (states the estimate never saw), or never caught
         stay, offers = self.read(gait, obs, phase)
-        into = self.spec["catch_into"]  # the catch table, or None: the gait offered most
-        dest = into[gait] if into else max(offers, key=lambda g: offers[g][0])
+        dest = into[gait] if into is not None else max(offers, key=lambda g: offers[g][0])
         if offers[dest][0] - stay > self.spec["margin"]:
             return dest, offers[dest][1]
         return None

@@ -176,15 +176,25 @@ def test_the_catch_table_is_measured_on_training_draws_and_written_into_the_esti
                          "--json")
     assert done.returncode == 0, done.stderr
     table = json.loads(done.stdout)
-    assert table["catch_into"] == {"stand": "trot", "trot": "stand"} and table["seed"] == 1000
-    assert all(set(row) == {"stay", other} and all(0 <= k <= 4 for k in row.values())
-               for (gait, row), other in zip(table["falls"].items(), ("trot", "stand"), strict=True))
+    other = {"stand": "trot", "trot": "stand"}
+    assert table["seed"] == 1000 and list(table["falls"]) == ["stand", "trot"]
+    assert all(set(row) == {"stay", other[g]} and all(0 <= k <= 4 for k in row.values())
+               for g, row in table["falls"].items())
+    # A gait is caught into the other only where catching fell less than staying on these draws.
+    assert table["catch_into"] == {g: other[g] for g, row in table["falls"].items() if row[other[g]] < row["stay"]}
     after = load_survival(library, setup.gaits)
-    assert after.catch_into == {setup.gait_index("stand"): setup.gait_index("trot"),
-                                setup.gait_index("trot"): setup.gait_index("stand")}
+    assert after.catch_into == {setup.gait_index(g): setup.gait_index(d) for g, d in table["catch_into"].items()}
     assert (after.horizon_s, after.margin, after.platt) == (before.horizon_s, before.margin, before.platt)
     assert after.info["catches"] == table
     bare = copy_library(Library(switching_library), tmp_path / "bare")
     refused = gaitlib_quick("survival", "catches", "--library", str(bare.root))
     assert refused.returncode != 0 and refused.stderr.count("\n") == 1 and "no survival estimate" in refused.stderr
+
+
+def test_a_gait_the_catch_table_lacks_is_never_caught(switching_library):
+    setup = load_switching(switching_library)
+    estimate = _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6})  # the trot would be caught at once
+    estimate.info["catches"] = {"catch_into": {"stand": "trot"}}  # ... but the table never catches it
+    catches, gaits, _ = _run(setup, estimate, 5, margin=0.0)
+    assert catches == [] and (gaits == setup.gait_index("trot")).all()
 

@@ -6,7 +6,8 @@ gait's latent has barely felt it, so the gait the net offers most is no better a
 gait of the library is shoved once (a :class:`~gaitlib.evaluation.SinglePush` of ``impulse`` N s on ``episodes``
 worlds) and every world switched at once, ``delay`` control steps after its shove starts, into each other gait at its
 best destination phase (the calibrated net's, as the guard switches), kept to the episode's end; the gait whose
-catches fell least is the table's, staying beside for reference. The draws are the caller's ``seed`` (training
+catches fell least is the table's, if they fell less than staying did (else the gait has no catch: the guard leaves
+it alone). The draws are the caller's ``seed`` (training
 seeds: never an evaluation's).
 """
 
@@ -109,9 +110,9 @@ def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfi
             if progress is not None:
                 progress(done, total)
         falls[name] = row
+    best = {name: min((d for d in row if d != "stay"), key=lambda d: (row[d], d)) for name, row in falls.items()}
     return {
-        "catch_into": {name: min((d for d in row if d != "stay"), key=lambda d: (row[d], d))
-                       for name, row in falls.items()},
+        "catch_into": {name: d for name, d in best.items() if falls[name][d] < falls[name]["stay"]},
         "falls": falls, "episodes": config.episodes, "impulse_ns": config.impulse_ns,
         "delay_steps": config.delay_steps, "seed": config.seed, "falls_definition": Falls(config.falls).value,
     }

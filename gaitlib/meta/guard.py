@@ -96,8 +96,9 @@ class Guard:
                                      explicit=explicit, imu=imu)
         stay = self.estimate.probability(features, gait).to(env.device)
         offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
-        if (table := self.estimate.catch_into) is not None:  # only the table's gait is offered
-            into = torch.tensor([table[g] for g in range(len(env.clips))], device=offer.device)[gait.to(offer.device)]
+        if (table := self.estimate.catch_into) is not None:  # only the table's gait is offered (none: -1)
+            into = torch.tensor([table.get(g, -1) for g in range(len(env.clips))], device=offer.device)
+            into = into[gait.to(offer.device)]
             other = torch.arange(offer.shape[1], device=offer.device) != into.unsqueeze(1)
             offer = offer.masked_fill(other, float("nan"))
         armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6

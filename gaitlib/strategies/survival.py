@@ -126,8 +126,8 @@ class SurvivalEstimate:
 
     @property
     def catch_into(self) -> dict[int, int] | None:
-        """Running gait -> the gait the guard catches it into (the catch table, ``gaitlib survival catches``;
-        ``None``: none measured, the gait the transition-net offers most)."""
+        """Running gait -> the gait the guard catches it into (the catch table, ``gaitlib survival catches``; a gait
+        it lacks is never caught; ``None``: no table, the gait the transition-net offers most)."""
         table = self.info.get("catches")
         if table is None:
             return None
