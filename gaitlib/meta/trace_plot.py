@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -79,10 +80,11 @@ def plot_trace(trace: RunTrace, path: Path) -> Path:
     outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s (purple)"
     touches = f"{trace.touches} leg touch(es) ridden through" if trace.touches else "no leg touch"
     guard = (f"guard on, {len(trace.catches)} catch(es) (orange, dashed)" if trace.guarded else "guard off")
+    summary = (f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome} "
+               f"(falls: {trace.falls}), {touches}, {guard}")
     fig.suptitle(
         f"{' → '.join((trace.source, *trace.dests))}, strategy {trace.strategy}, push {trace.push_n:g} N:\n"
-        f"{len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) (red), {outcome} "
-        f"(falls: {trace.falls}), {touches}, {guard}",
+        + textwrap.fill(summary, width=110),  # the figure's width: a longer line would be cut at its edges
         fontsize=10,
     )
     fig.tight_layout()
