@@ -86,14 +86,14 @@ FULL = CheckSizes(
 TINY = CheckSizes(
     device="cpu",
     sim_worlds=(8,),
-    sim_seconds=0.5,
+    sim_seconds=0.25,
     jobs_backend="mujoco",
     train_preset="tiny",
-    train_seconds=1.0,
+    train_seconds=0.5,
     eval_episodes=2,
     eval_seconds=0.5,
     collect_worlds=8,
-    collect_seconds=0.7,
+    collect_seconds=0.35,
     collect_chunk=8,
     push_max=400.0,
 )

@@ -41,20 +41,20 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     lib, data = str(tiny_library.root), str(tmp_path / "ray.h5")
     quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8",
              "--seed", "0"]  # the same seed for both runs (without it, each collection draws its own)
-    ran = gaitlib_quick("collect", "--samples", "24", "--out", data, "--library", lib, *quick, "--ray",
+    ran = gaitlib_quick("collect", "--samples", "16", "--out", data, "--library", lib, *quick, "--ray",
                         "--workers", "2")
     assert ran.returncode == 0, ran.stderr
     assert not ray.is_initialized()  # the local Ray was stopped with the run
     plain = str(tmp_path / "plain.h5")
-    assert gaitlib_quick("collect", "--samples", "24", "--out", plain, "--library", lib, *quick).returncode == 0
+    assert gaitlib_quick("collect", "--samples", "16", "--out", plain, "--library", lib, *quick).returncode == 0
     assert_same(read(data).samples, read(plain).samples)
     with_ray, without = validate(data), validate(plain)
-    assert (with_ray.header, with_ray.count) == (without.header, without.count) == (validate(data).header, 24)
+    assert (with_ray.header, with_ray.count) == (without.header, without.count) == (validate(data).header, 16)
     writable = str(copy_library(tiny_library, tmp_path / "library").root)  # fit writes switching/ into it
     fitted = gaitlib_quick("fit", "--data", data, "--epochs", "2", "--library", writable, "--json",
                            "--min-per-label", "0")
     assert fitted.returncode == 0, fitted.stderr
-    assert json.loads(fitted.stdout)["samples"] == 24
+    assert json.loads(fitted.stdout)["samples"] == 16
 
 
 @pytest.fixture(scope="module")

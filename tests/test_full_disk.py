@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import gaitlib_quick
 
 from gaitlib.transitions import validate
 
@@ -50,12 +51,15 @@ def _one_line(stderr: str, start: str) -> None:
 
 
 def test_collect_on_a_full_disk_keeps_its_committed_samples_in_one_line(tiny_library, tmp_path) -> None:
-    collect = (f"eval \"$CLI\" collect --library {tiny_library.root} --worlds 4 --chunk 4 --horizon 0.5 --backend "
-               "mujoco --out \"$DISK/t.h5\"")
+    options = ("--library", str(tiny_library.root), "--worlds", "4", "--chunk", "4", "--horizon", "0.5", "--backend",
+               "mujoco", "--seed", "0")
+    first = tmp_path / "first"
+    first.mkdir()
+    assert gaitlib_quick("collect", *options, "--out", str(first / "t.h5"), "--samples", "4").returncode == 0
     done = on_a_small_disk(tmp_path, f"""
-{collect} --samples 4
+cp -r {first}/t.h5 {first}/t.h5.parts "$DISK"/
 fill_but 4
-{collect} --samples 400
+eval "$CLI" collect {shlex.join(options)} --out "$DISK/t.h5" --samples 400
 echo "status $?"
 mkdir {tmp_path}/kept && cp -r "$DISK/t.h5" "$DISK/t.h5.parts" {tmp_path}/kept/
 """)
