@@ -1,7 +1,9 @@
 """The guard: every control step, whether or not a switch is requested, each world's chance of staying up if it
 keeps its gait (the survival estimate, :mod:`gaitlib.strategies.survival`) is compared with what switching now
 offers (the calibrated transition-net at each other gait's best destination phase,
-:meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`); where the best offer beats staying by more than
+:meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`; where the estimate holds a catch table,
+:attr:`SurvivalEstimate.catch_into`, at the table's gait alone, and a gait the table lacks is never caught); where
+the best offer beats staying by more than
 the margin, the world switches there at once (a *catch*), without waiting for a better phase. The guard acts from
 the earliest moment of an episode its estimate saw a state of (:attr:`SurvivalEstimate.armed_from_s`, the
 recording's first; before it the robot settles from its start, states the estimate never learnt). After a catch the
