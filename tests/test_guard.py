@@ -186,6 +186,13 @@ def test_the_catch_table_is_measured_on_training_draws_and_written_into_the_esti
     assert after.catch_into == {setup.gait_index(g): setup.gait_index(d) for g, d in table["catch_into"].items()}
     assert (after.horizon_s, after.margin, after.platt) == (before.horizon_s, before.margin, before.platt)
     assert after.info["catches"] == table
+    # Measured again, every destination is still offered: the table the estimate now holds does not hide them.
+    from gaitlib.benchmark.catches import TimedCatch
+
+    guarded = load_switching(library.root).guard()
+    shove = {"impulse": 1.0, "duration_s": 0.1, "cycle_s": 0.5, "seed": 0}
+    assert TimedCatch(guarded, delay=2, dest=0, shove=shove).estimate.catch_into is None
+    assert TimedCatch(guarded, delay=2, dest=None, shove=shove).estimate.catch_into == after.catch_into
     bare = copy_library(Library(switching_library), tmp_path / "bare")
     refused = gaitlib_quick("survival", "catches", "--library", str(bare.root))
     assert refused.returncode != 0 and refused.stderr.count("\n") == 1 and "no survival estimate" in refused.stderr

@@ -13,6 +13,7 @@ seeds: never an evaluation's).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -38,7 +39,10 @@ class TimedCatch(Guard):
     reading offers most; it never returns."""
 
     def __init__(self, guard: Guard, *, delay: int, dest: int | None, shove: dict) -> None:
-        super().__init__(guard.estimate, guard.scorer, margin=guard.margin)
+        estimate = guard.estimate  # a fixed destination is offered whatever catch table the estimate holds
+        if dest is not None:
+            estimate = dataclasses.replace(estimate, info={k: v for k, v in estimate.info.items() if k != "catches"})
+        super().__init__(estimate, guard.scorer, margin=guard.margin)
         self.delay, self.dest, self.shove = delay, dest, shove
         self._start: torch.Tensor | None = None
         self._env = None
