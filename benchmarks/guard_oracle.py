@@ -22,12 +22,8 @@ import json
 from pathlib import Path
 
 from gaitlib.benchmark.catches import timed_catch_falls
-from gaitlib.benchmark.guarded_push import guarded_push_rollout
+from gaitlib.benchmark.guarded_push import guarded_push_rollout, shove_episode
 from gaitlib.defaults import DEFAULT_FALLS
-from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import TerminationConfig
-from gaitlib.evaluation import AFTER_S, SETTLE_S
 from gaitlib.meta import load_switching
 from gaitlib.stats import wilson_interval
 
@@ -50,11 +46,9 @@ def main() -> None:
     def fell(dest: int | None, delay: int):
         return timed_catch_falls(setup, guard, g, dest, delay_steps=delay, **sizes)
 
-    cycle_s, duration_s = 1.0 / setup.entries[g].clip.phase_rate, 0.1
-    cfg = EnvConfig(episode_seconds=SETTLE_S + cycle_s + duration_s + AFTER_S, pushes=PushConfig(max_force=0.0),
-                    termination=TerminationConfig().counting(DEFAULT_FALLS, heading=False))
+    cfg, cycle_s = shove_episode(setup, g, duration_s=0.1, falls=DEFAULT_FALLS)
     guarded = guarded_push_rollout(setup, g, guard, cfg, impulse=args.impulse, episodes=args.episodes,
-                                   duration_s=duration_s, cycle_s=cycle_s, backend=args.backend, seed=args.seed)
+                                   duration_s=0.1, cycle_s=cycle_s, backend=args.backend, seed=args.seed)
     delays = [int(d) for d in args.delays.split(",")]
     rows = {"stay (unguarded)": fell(-1, 0), "the guard": guarded.tally.fell.cpu().bool()}
     for delay in delays:

@@ -18,12 +18,9 @@ from dataclasses import dataclass
 
 import torch
 
-from gaitlib.benchmark.guarded_push import guarded_push_rollout
+from gaitlib.benchmark.guarded_push import guarded_push_rollout, shove_episode
 from gaitlib.defaults import DEFAULT_FALLS, Falls
-from gaitlib.envs import EnvConfig
-from gaitlib.envs.randomization import PushConfig
-from gaitlib.envs.terminations import TerminationConfig
-from gaitlib.evaluation import AFTER_S, SETTLE_S, SinglePush
+from gaitlib.evaluation import SinglePush
 from gaitlib.meta.guard import Guard, GuardReading
 from gaitlib.meta.setup import SwitchingSetup
 
@@ -88,9 +85,8 @@ def timed_catch_falls(setup: SwitchingSetup, guard: Guard, gait: int, dest: int 
     """(episodes,) bool: the worlds of ``gait`` that fell, shoved once with ``impulse_ns`` N s and caught
     ``delay_steps`` control steps after into ``dest`` (``-1``: not caught, staying; ``None``: the gait ``guard``
     offers most)."""
-    cycle_s, duration_s = 1.0 / setup.entries[gait].clip.phase_rate, 0.1
-    cfg = EnvConfig(episode_seconds=SETTLE_S + cycle_s + duration_s + AFTER_S, pushes=PushConfig(max_force=0.0),
-                    termination=TerminationConfig().counting(falls, heading=False))
+    duration_s = 0.1
+    cfg, cycle_s = shove_episode(setup, gait, duration_s=duration_s, falls=falls)
     shove = {"impulse": impulse_ns, "duration_s": duration_s, "cycle_s": cycle_s, "seed": seed}
     catching = None if dest == -1 else TimedCatch(guard, delay=delay_steps, dest=dest, shove=shove)
     run = guarded_push_rollout(setup, gait, catching, cfg, impulse=impulse_ns, episodes=episodes,

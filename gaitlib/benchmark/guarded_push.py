@@ -28,7 +28,7 @@ from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.sim import make_backend
 
-__all__ = ["GuardedRollout", "guarded_episodes", "guarded_push_curve", "guarded_push_rollout"]
+__all__ = ["GuardedRollout", "guarded_episodes", "guarded_push_curve", "guarded_push_rollout", "shove_episode"]
 
 
 def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None, impulses: Sequence[float],
@@ -37,11 +37,19 @@ def guarded_push_curve(setup: SwitchingSetup, gait: str, *, guard: Guard | None,
     """The fall rate of ``gait`` on ``setup``'s meta-controller under one shove of each impulse (N s), ``episodes``
     worlds per impulse, guarded by ``guard`` (``None``: unguarded, the same draws)."""
     g = setup.gait_index(gait)
+    cfg, cycle_s = shove_episode(setup, g, duration_s=duration_s, falls=falls)
+    return [_point(setup, g, guard, cfg, impulse, episodes, duration_s, cycle_s, backend, seed + k)
+            for k, impulse in enumerate(impulses)]
+
+
+def shove_episode(setup: SwitchingSetup, g: int, *, duration_s: float, falls: Falls) -> tuple[EnvConfig, float]:
+    """(the environment of one single-shove episode of gait ``g``, the gait's cycle, s): as long as
+    :func:`~gaitlib.evaluation.push_curve.single_push_curve`'s (settle, a cycle for the shove's start, the shove, the
+    time after), no random pushes, falls by ``falls`` and heading drift none."""
     cycle_s = 1.0 / setup.entries[g].clip.phase_rate
     cfg = EnvConfig(episode_seconds=SETTLE_S + cycle_s + duration_s + AFTER_S, pushes=PushConfig(max_force=0.0),
                     termination=TerminationConfig().counting(falls, heading=False))
-    return [_point(setup, g, guard, cfg, impulse, episodes, duration_s, cycle_s, backend, seed + k)
-            for k, impulse in enumerate(impulses)]
+    return cfg, cycle_s
 
 
 def _point(setup, g: int, guard: Guard | None, cfg: EnvConfig, impulse: float, episodes: int, duration_s: float,
