@@ -1,7 +1,9 @@
 """The guard's decision on a robot, from the folder ``gaitlib survival export`` writes: numpy and onnxruntime only.
 
-Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, the reference phase
-and the time since the robot started, s; it answers whether to switch now, to which gait and destination phase.
+Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, the reference phase,
+the time since the robot started, s, and the trunk's acceleration in its own frame with gravity taken away (x
+forward, y left, z up; m/s^2, over the last control step: what the IMU reads); it answers whether to switch now, to
+which gait and destination phase.
 """
 
 import json
@@ -27,12 +29,13 @@ class RobotGuard:
         self.net = ort.InferenceSession(str(folder / "net.onnx"))
         self.candidates = np.asarray(self.spec["candidates"], dtype=np.float32)
 
-    def read(self, gait, obs, phase):
+    def read(self, gait, obs, phase, acceleration):
         """(staying up, {other gait: (calibrated offer, best destination phase)})."""
         m, count = self.gaits.index(gait), len(self.gaits)
         psi = self.latent[gait].run(None, {"obs": obs.reshape(1, -1).astype(np.float32)})[0][0]
         angle = 2 * np.pi * phase
-        x = np.concatenate([np.eye(count)[m], psi, [np.sin(angle), np.cos(angle)]]).astype(np.float32)
+        imu = acceleration if "imu" in self.spec["inputs"] else []
+        x = np.concatenate([np.eye(count)[m], psi, [np.sin(angle), np.cos(angle)], imu]).astype(np.float32)
         a, b = self.spec["survival_platt"][gait]
         stay = sigmoid(a * self.survival.run(None, {"features": x[None]})[0][0] + b)
         offers = {}
@@ -51,13 +54,19 @@ class RobotGuard:
             offers[dest] = (float(p[best]), float(self.candidates[best]))
         return float(stay), offers
 
-    def decide(self, gait, obs, phase, time_s):
+    def sector(self, acceleration):
+        """The direction the trunk is pushed toward, one of spec["sectors"] (front, left, back, right)."""
+        k = np.round(np.arctan2(acceleration[1], acceleration[0]) / (np.pi / 2))
+        return self.spec["sectors"][int(k) % 4]
+
+    def decide(self, gait, obs, phase, time_s, acceleration):
         """(gait, destination phase) to switch to at once, or None to keep the gait."""
-        into = self.spec["catch_into"]  # the catch table (a gait it lacks is never caught), or None
-        if time_s < self.spec["armed_from_s"] or (into is not None and gait not in into):
+        table = self.spec["catch_into"]  # gait -> sector -> catch (where it lacks one, never caught), or None
+        into = None if table is None else table.get(gait, {}).get(self.sector(acceleration))
+        if time_s < self.spec["armed_from_s"] or (table is not None and into is None):
             return None  # still settling from the start (states the estimate never saw), or never caught
-        stay, offers = self.read(gait, obs, phase)
-        dest = into[gait] if into is not None else max(offers, key=lambda g: offers[g][0])
+        stay, offers = self.read(gait, obs, phase, acceleration)
+        dest = into if into is not None else max(offers, key=lambda g: offers[g][0])
         if offers[dest][0] - stay > self.spec["margin"]:
             return dest, offers[dest][1]
         return None

@@ -11,6 +11,7 @@ import torch
 
 from gaitlib.envs import EnvConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.evaluation import SECTORS
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
 from gaitlib.meta.guard import Guard
@@ -178,12 +179,19 @@ def test_the_catch_table_is_measured_on_training_draws_and_written_into_the_esti
     table = json.loads(done.stdout)
     other = {"stand": "trot", "trot": "stand"}
     assert table["seed"] == 1000 and list(table["falls"]) == ["stand", "trot"]
-    assert all(set(row) == {"stay", other[g]} and all(0 <= k <= 4 for k in row.values())
-               for g, row in table["falls"].items())
-    # A gait is caught into the other only where catching fell less than staying on these draws.
-    assert table["catch_into"] == {g: other[g] for g, row in table["falls"].items() if row[other[g]] < row["stay"]}
+    for g, by_sector in table["falls"].items():
+        assert list(by_sector) == list(SECTORS) and sum(table["worlds"][g].values()) == 4  # each world read once
+        for s, row in by_sector.items():
+            assert set(row) == {"stay", other[g]} and all(0 <= k <= table["worlds"][g][s] for k in row.values())
+            # A gait shoved this way is caught into the other only where catching fell less than staying.
+            assert table["catch_into"].get(g, {}).get(s) == (other[g] if row[other[g]] < row["stay"] else None)
+    assert all(0 <= a <= 1 for a in table["sector_agreement"].values())  # read sector = shoved sector, a share
     after = load_survival(library, setup.gaits)
-    assert after.catch_into == {setup.gait_index(g): setup.gait_index(d) for g, d in table["catch_into"].items()}
+    expected = torch.full((2, len(SECTORS)), -1)
+    for g, row in table["catch_into"].items():
+        for s, d in row.items():
+            expected[setup.gait_index(g), SECTORS.index(s)] = setup.gait_index(d)
+    assert torch.equal(after.catch_into, expected)
     assert (after.horizon_s, after.margin, after.platt) == (before.horizon_s, before.margin, before.platt)
     assert after.info["catches"] == table
     # Measured again, every destination is still offered: the table the estimate now holds does not hide them.
@@ -192,7 +200,7 @@ def test_the_catch_table_is_measured_on_training_draws_and_written_into_the_esti
     guarded = load_switching(library.root).guard()
     shove = {"impulse": 1.0, "duration_s": 0.1, "cycle_s": 0.5, "seed": 0}
     assert TimedCatch(guarded, delay=2, dest=0, shove=shove).estimate.catch_into is None
-    assert TimedCatch(guarded, delay=2, dest=None, shove=shove).estimate.catch_into == after.catch_into
+    assert torch.equal(TimedCatch(guarded, delay=2, dest=None, shove=shove).estimate.catch_into, after.catch_into)
     bare = copy_library(Library(switching_library), tmp_path / "bare")
     refused = gaitlib_quick("survival", "catches", "--library", str(bare.root))
     assert refused.returncode != 0 and refused.stderr.count("\n") == 1 and "no survival estimate" in refused.stderr
@@ -205,3 +213,22 @@ def test_a_gait_the_catch_table_lacks_is_never_caught(switching_library):
     catches, gaits, _ = _run(setup, estimate, 5, margin=0.0)
     assert catches == [] and (gaits == setup.gait_index("trot")).all()
 
+
+
+def test_the_catch_table_catches_by_the_direction_the_trunk_is_pushed(switching_library):
+    setup = load_switching(switching_library)
+    estimate = _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6})  # the trot would be caught at once ...
+    estimate.info["catches"] = {"catch_into": {"trot": {"left": "stand"}}}  # ... when pushed toward its left only
+    sim = make_backend("mujoco", num_worlds=4)
+    try:
+        env = setup.make_env(sim, EnvConfig(episode_seconds=30.0), seed=0)
+        env.reset_worlds(torch.arange(4), gait=torch.full((4,), setup.gait_index("trot")))
+        guard = Guard(estimate, get_strategy("net-lookahead", setup.resources), margin=0.0)
+        ctl = setup.controller(env, "net-lookahead")
+        # Pushed left, front, back and right: the trunk-frame acceleration (x forward, y left), m/s^2.
+        env.trunk_acceleration = torch.tensor([[0.5, 9.0, 0.0], [9.0, 0.5, 0.0], [-9.0, 0.5, 0.0], [0.5, -9.0, 0.0]])
+        reading = guard.read(env, ctl.policies, torch.arange(4), ctl.candidates)
+    finally:
+        sim.close()
+    assert guard.fires(reading).tolist() == [True, False, False, False]
+    assert reading.best()[1][0] == setup.gait_index("stand")

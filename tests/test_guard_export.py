@@ -14,6 +14,7 @@ import torch
 
 from gaitlib.envs import EnvConfig
 from gaitlib.errors import GaitlibError
+from gaitlib.evaluation import SECTORS
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
 from gaitlib.sim import make_backend
@@ -29,7 +30,7 @@ def _estimate(setup, inputs: tuple[str, ...], margin: float) -> SurvivalEstimate
     """An estimate of random weights (a real MLP, so that the export carries its weights and standardization)."""
     torch.manual_seed(0)
     latent = setup.entries[0].policy.latent_dim
-    dim = len(setup.gaits) + latent + 2 + (1 if "value" in inputs else 0)
+    dim = len(setup.gaits) + latent + 2 + (1 if "value" in inputs else 0) + (3 if "imu" in inputs else 0)
     net = SurvivalNet(dim)
     net.mean.normal_()
     net.std.uniform_(0.5, 2.0)
@@ -49,9 +50,10 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
 
     library = copy_library(Library(switching_library), tmp_path / "library")
     setup = load_switching(library.root)
-    estimate = _estimate(setup, ("latent", "phase"), margin=0.0)
+    estimate = _estimate(setup, ("latent", "phase", "imu"), margin=0.0)
     estimate.info["armed_from_s"] = 2 / 30  # the first two control steps of an episode: no catch on either side
-    estimate.info["catches"] = {"catch_into": {"stand": "trot", "trot": "stand"}}  # a catch table travels with it
+    table = {"stand": {"front": "trot", "back": "trot"}, "trot": dict.fromkeys(SECTORS, "stand")}
+    estimate.info["catches"] = {"catch_into": table}  # a catch table by direction travels with it
     (tmp_path / "states.h5").write_bytes(b"random")
     save_survival(library, estimate, data=tmp_path / "states.h5")
     run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "export", "--out", str(tmp_path / "guard"),
@@ -61,7 +63,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     robot = module.RobotGuard(tmp_path / "guard")
-    assert robot.spec["catch_into"] == {"stand": "trot", "trot": "stand"} and robot.spec["armed_from_s"] == 2 / 30
+    assert robot.spec["catch_into"] == table and robot.spec["armed_from_s"] == 2 / 30
     guard = Guard(estimate, get_strategy("net-lookahead", setup.resources))
     sim = make_backend("mujoco", num_worlds=3)
     try:
@@ -76,16 +78,20 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
             fired.append(bool(fires.any()))
             assert not (fires & ~reading.armed).any() and (step >= 2 or not reading.armed.any())  # (a fall restarts)
             obs = env.get_observations()["policy"].cpu().numpy()
+            imu = env.trunk_acceleration.cpu().numpy()
             for w in range(3):
                 gait = setup.gaits[int(env.gait[w])]
-                stay, offers = robot.read(gait, obs[w], float(env.phase[w]))
+                stay, offers = robot.read(gait, obs[w], float(env.phase[w]), imu[w])
                 assert stay == pytest.approx(float(reading.stay[w]), abs=1e-4)
+                if table[gait].get(robot.sector(imu[w])) is None:  # pushed where the table has no catch
+                    assert reading.offer[w].isnan().all()
                 for dest, (offer, phase) in offers.items():
                     n = setup.gait_index(dest)
-                    assert offer == pytest.approx(float(reading.offer[w, n]), abs=1e-4)
+                    if not reading.offer[w, n].isnan():
+                        assert offer == pytest.approx(float(reading.offer[w, n]), abs=1e-4)
                     assert phase == pytest.approx(float(reading.phase[w, n]))
                 time_s = float(env.episode_length_buf[w]) * env.dt
-                decided = robot.decide(gait, obs[w], float(env.phase[w]), time_s)
+                decided = robot.decide(gait, obs[w], float(env.phase[w]), time_s, imu[w])
                 assert (decided is not None) == bool(fires[w])
                 if decided is not None:
                     n = int(reading.best()[1][w])

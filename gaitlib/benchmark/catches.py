@@ -5,10 +5,12 @@ gait's latent has barely felt it, so the gait the net offers most is no better a
 (``benchmarks/guard_oracle.py``). The catch table instead names, for each running gait, the gait to catch into: each
 gait of the library is shoved once (a :class:`~gaitlib.evaluation.SinglePush` of ``impulse`` N s on ``episodes``
 worlds) and every world switched at once, ``delay`` control steps after its shove starts, into each other gait at its
-best destination phase (the calibrated net's, as the guard switches), kept to the episode's end; the gait whose
-catches fell least is the table's, if they fell less than staying did (else the gait has no catch: the guard leaves
-it alone). The draws are the caller's ``seed`` (training
-seeds: never an evaluation's).
+best destination phase (the calibrated net's, as the guard switches), kept to the episode's end. The worlds are
+sorted by the sector of :data:`~gaitlib.evaluation.SECTORS` their trunk's acceleration points to at the catch
+(:func:`~gaitlib.strategies.survival.shove_sector`, what the guard reads then); in each sector, the gait whose
+catches fell least is the table's, if they fell less than staying did (else that sector has no catch: the guard
+leaves the gait alone when shoved that way). The draws are the caller's ``seed`` (training seeds: never an
+evaluation's).
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ import torch
 
 from gaitlib.benchmark.guarded_push import guarded_push_rollout, shove_episode
 from gaitlib.defaults import DEFAULT_FALLS, Falls
-from gaitlib.evaluation import SinglePush
+from gaitlib.evaluation import SECTORS, SinglePush, sector_of
 from gaitlib.meta.guard import Guard, GuardReading
 from gaitlib.meta.setup import SwitchingSetup
+from gaitlib.strategies.survival import shove_sector
 
 __all__ = ["CatchTableConfig", "TimedCatch", "fit_catch_table", "timed_catch_falls"]
 
@@ -33,7 +36,8 @@ _NEVER_S = 1e6
 class TimedCatch(Guard):
     """A guard that catches every world exactly ``delay`` control steps after its shove starts (the shove ``shove``
     describes: :class:`SinglePush`'s arguments), into gait ``dest`` or, with ``dest`` ``None``, into the gait the
-    reading offers most; it never returns."""
+    reading offers most; it never returns. It keeps, per world, the sector its trunk's acceleration pointed to at the
+    catch (:attr:`sector`) and the sector it was shoved toward (:attr:`shoved`)."""
 
     def __init__(self, guard: Guard, *, delay: int, dest: int | None, shove: dict) -> None:
         estimate = guard.estimate  # a fixed destination is offered whatever catch table the estimate holds
@@ -43,6 +47,10 @@ class TimedCatch(Guard):
         self.delay, self.dest, self.shove = delay, dest, shove
         self._start: torch.Tensor | None = None
         self._env = None
+        self.sector: torch.Tensor | None = None
+        """(N,) index into SECTORS read from each world's acceleration at its catch (-1: not reached)."""
+        self.shoved: torch.Tensor | None = None
+        """(N,) index into SECTORS of each world's shove, relative to its heading."""
 
     @property
     def horizon_s(self) -> float:
@@ -50,7 +58,11 @@ class TimedCatch(Guard):
 
     def read(self, env, policies, ids, candidates) -> GuardReading:
         if self._env is not env:  # the rollout's own draws (SinglePush is drawn from its seed alone)
-            self._env, self._start = env, SinglePush(env, **self.shove).start
+            push = SinglePush(env, **self.shove)
+            self._env, self._start, self.shoved = env, push.start, sector_of(push.angle).cpu()
+            self.sector = torch.full((env.num_envs,), -1, dtype=torch.long)
+        due = (env.episode_length_buf[ids] == self._start[ids] + self.delay).cpu()
+        self.sector[ids.cpu()[due]] = shove_sector(env.trunk_acceleration[ids][due.to(env.device)]).cpu()
         reading = super().read(env, policies, ids, candidates)
         if self.dest is not None:
             keep = torch.zeros_like(reading.offer, dtype=torch.bool)
@@ -81,38 +93,52 @@ class CatchTableConfig:
 
 def timed_catch_falls(setup: SwitchingSetup, guard: Guard, gait: int, dest: int | None, *, impulse_ns: float,
                       episodes: int, delay_steps: int, seed: int, backend: str,
-                      falls: Falls = DEFAULT_FALLS) -> torch.Tensor:
-    """(episodes,) bool: the worlds of ``gait`` that fell, shoved once with ``impulse_ns`` N s and caught
-    ``delay_steps`` control steps after into ``dest`` (``-1``: not caught, staying; ``None``: the gait ``guard``
-    offers most)."""
+                      falls: Falls = DEFAULT_FALLS) -> tuple[torch.Tensor, TimedCatch | None]:
+    """((episodes,) bool: the worlds of ``gait`` that fell, shoved once with ``impulse_ns`` N s and caught
+    ``delay_steps`` control steps after into ``dest``; the catching guard, which kept each world's sectors) (``dest``
+    ``-1``: not caught, staying, and no guard; ``None``: into the gait ``guard`` offers most)."""
     duration_s = 0.1
     cfg, cycle_s = shove_episode(setup, gait, duration_s=duration_s, falls=falls)
     shove = {"impulse": impulse_ns, "duration_s": duration_s, "cycle_s": cycle_s, "seed": seed}
     catching = None if dest == -1 else TimedCatch(guard, delay=delay_steps, dest=dest, shove=shove)
     run = guarded_push_rollout(setup, gait, catching, cfg, impulse=impulse_ns, episodes=episodes,
                                duration_s=duration_s, cycle_s=cycle_s, backend=backend, seed=seed)
-    return run.tally.fell.cpu().bool()
+    return run.tally.fell.cpu().bool(), catching
 
 
 def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfig, *, progress=None) -> dict:
-    """The catch table of ``setup``'s gaits (module doc): JSON-ready, with every rollout's falls."""
+    """The catch table of ``setup``'s gaits (module doc): JSON-ready, with every rollout's falls per sector."""
     gaits = setup.gaits
-    falls: dict[str, dict[str, int]] = {}
+    falls: dict[str, dict[str, dict[str, int]]] = {}
+    worlds: dict[str, dict[str, int]] = {}
+    agreement: dict[str, float] = {}
     done, total = 0, len(gaits) ** 2
     for g, name in enumerate(gaits):
-        row = {}
+        fell = {}
         for d in [-1, *(d for d in range(len(gaits)) if d != g)]:
-            fell = timed_catch_falls(setup, guard, g, d, impulse_ns=config.impulse_ns, episodes=config.episodes,
-                                     delay_steps=config.delay_steps, seed=config.seed + g, backend=config.backend,
-                                     falls=config.falls)
-            row["stay" if d == -1 else gaits[d]] = int(fell.sum())
+            fell["stay" if d == -1 else gaits[d]], catching = timed_catch_falls(
+                setup, guard, g, d, impulse_ns=config.impulse_ns, episodes=config.episodes,
+                delay_steps=config.delay_steps, seed=config.seed + g, backend=config.backend, falls=config.falls)
+            if catching is not None:  # every catch rollout reads the same sectors (one shove draw, one state)
+                sector, shoved = catching.sector, catching.shoved
             done += 1
             if progress is not None:
                 progress(done, total)
-        falls[name] = row
-    best = {name: min((d for d in row if d != "stay"), key=lambda d: (row[d], d)) for name, row in falls.items()}
+        falls[name] = {s: {option: int(f[sector == k].sum()) for option, f in fell.items()}
+                       for k, s in enumerate(SECTORS)}
+        worlds[name] = {s: int((sector == k).sum()) for k, s in enumerate(SECTORS)}
+        agreement[name] = float((sector == shoved).float().mean())
+    catch_into = {}
+    for name, by_sector in falls.items():
+        row = {}
+        for s, counts in by_sector.items():
+            best = min((d for d in counts if d != "stay"), key=lambda d: (counts[d], d))
+            if counts[best] < counts["stay"]:
+                row[s] = best
+        if row:
+            catch_into[name] = row
     return {
-        "catch_into": {name: d for name, d in best.items() if falls[name][d] < falls[name]["stay"]},
-        "falls": falls, "episodes": config.episodes, "impulse_ns": config.impulse_ns,
-        "delay_steps": config.delay_steps, "seed": config.seed, "falls_definition": Falls(config.falls).value,
+        "catch_into": catch_into, "falls": falls, "worlds": worlds, "sector_agreement": agreement,
+        "episodes": config.episodes, "impulse_ns": config.impulse_ns, "delay_steps": config.delay_steps,
+        "seed": config.seed, "falls_definition": Falls(config.falls).value,
     }

@@ -120,8 +120,8 @@ def catches_command(
     as_json: bool = typer.Option(False, "--json", help="Print the table as one JSON object."),
 ) -> None:
     """Measure where the guard catches each gait to and write it into the library's survival estimate: every gait
-    shoved once, caught --delay steps later into each other gait in turn; the one that fell least is its catch
-    (docs/switching.md, "The guard")."""
+    shoved once, caught --delay steps later into each other gait in turn; in each direction of shove, the one that
+    fell least is its catch where it fell less than staying (docs/switching.md, "The guard")."""
     from gaitlib.benchmark.catches import CatchTableConfig, fit_catch_table
     from gaitlib.library.target import check_writable, library_writer
     from gaitlib.meta import load_switching
@@ -140,9 +140,12 @@ def catches_command(
     if as_json:
         print(json_text(table))
         return
-    print(f"{path}: catch into " + ", ".join(f"{g} -> {d}" for g, d in table["catch_into"].items()))
-    for gait, row in table["falls"].items():
-        print(f"  {gait}: falls of {episodes} at {impulse:g} N s: " + ", ".join(f"{d} {k}" for d, k in row.items()))
+    print(f"{path}: falls at {impulse:g} N s by the sector the trunk is pushed toward, and the catch chosen (*)")
+    for gait, by_sector in table["falls"].items():
+        into = table["catch_into"].get(gait, {})
+        for sector, row in by_sector.items():
+            counts = ", ".join(f"{d}{'*' if into.get(sector) == d else ''} {k}" for d, k in row.items())
+            print(f"  {gait} {sector} ({table['worlds'][gait][sector]} worlds): {counts}")
 
 
 @app.command("export")

@@ -11,6 +11,7 @@ from gaitlib.evaluation.push_curve import (
     SETTLE_S,
     PushPoint,
     SinglePush,
+    sector_of,
     single_push_curve,
     write_push_plot,
 )
@@ -29,6 +30,7 @@ __all__ = [
     "SwitchIn",
     "evaluate_policy",
     "rollout",
+    "sector_of",
     "single_push_curve",
     "steers",
     "switch_in",

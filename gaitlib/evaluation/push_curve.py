@@ -28,7 +28,8 @@ from gaitlib.library.policy import GaitPolicy
 from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
 
-__all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "SinglePush", "single_push_curve", "write_push_plot"]
+__all__ = ["AFTER_S", "SECTORS", "SETTLE_S", "PushPoint", "SinglePush", "sector_of", "single_push_curve",
+           "write_push_plot"]
 
 SETTLE_S = 1.0
 """Walking time before the push window opens, s."""
@@ -36,6 +37,12 @@ AFTER_S = 3.0
 """Time after the push's end that the episode goes on, s: a push-caused fall comes within about a second."""
 SECTORS = ("front", "left", "back", "right")
 """Push directions relative to the robot's heading at the push, 90 degrees each, centred on these."""
+
+
+def sector_of(angle: torch.Tensor) -> torch.Tensor:
+    """(k,) index into :data:`SECTORS` of directions ``angle`` (k,), rad from the robot's forward axis, left
+    positive."""
+    return torch.remainder(torch.round(angle / (math.pi / 2)), 4).long()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -105,7 +112,7 @@ class SinglePush:
 
     def by_sector(self, fell: torch.Tensor) -> dict[str, tuple[int, int]]:
         """Sector of :data:`SECTORS` -> (worlds of ``fell``, a flag per world, that fell; worlds pushed there)."""
-        sector = torch.remainder(torch.round(self.angle / (math.pi / 2)), 4).long().cpu()
+        sector = sector_of(self.angle).cpu()
         fell = fell.cpu()
         return {name: (int(fell[sector == k].sum()), int((sector == k).sum())) for k, name in enumerate(SECTORS)}
 

@@ -1,16 +1,16 @@
-"""The guard: every control step, whether or not a switch is requested, each world's chance of staying up if it
-keeps its gait (the survival estimate, :mod:`gaitlib.strategies.survival`) is compared with what switching now
-offers (the calibrated transition-net at each other gait's best destination phase,
+"""The guard: every control step, whether or not a switch is requested, each world's chance of staying up if it keeps
+its gait (the survival estimate, :mod:`gaitlib.strategies.survival`) is compared with what switching now offers (the
+calibrated transition-net at each other gait's best destination phase,
 :meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`; where the estimate holds a catch table,
-:attr:`SurvivalEstimate.catch_into`, at the table's gait alone, and a gait the table lacks is never caught); where
-the best offer beats staying by more than
-the margin, the world switches there at once (a *catch*), without waiting for a better phase. The guard acts from
-the earliest moment of an episode its estimate saw a state of (:attr:`SurvivalEstimate.armed_from_s`, the
-recording's first; before it the robot settles from its start, states the estimate never learnt). After a catch the
-world holds the gait it was caught into for the estimate's horizon (it is not caught again meanwhile: the net's
-offer already counted the time after that switch), then returns to the requested gait through the
-normal switch (the controller's strategy), which is when it is safe by that strategy's measure.
-"""
+:attr:`SurvivalEstimate.catch_into`, at the table's gait alone for the running gait and the direction the trunk's
+acceleration says it is pushed toward, and where the table has none it is never caught); where the best offer beats
+staying by more than the margin, the world switches there at once (a *catch*), without waiting for a better phase.
+The guard acts from the earliest moment of an episode its estimate saw a state of
+(:attr:`SurvivalEstimate.armed_from_s`, the recording's first; before it the robot settles from its start, states
+the estimate never learnt). After a catch the world holds the gait it was caught into for the estimate's horizon (it
+is not caught again meanwhile: the net's offer already counted the time after that switch), then returns to the
+requested gait through the normal switch (the controller's strategy), which is when it is safe by that strategy's
+measure."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import torch
 
 from gaitlib.library.policy import GaitPolicy, per_gait
 from gaitlib.strategies.lookahead import LookaheadStrategy
-from gaitlib.strategies.survival import SurvivalEstimate, check_guard, survival_features
+from gaitlib.strategies.survival import SurvivalEstimate, check_guard, shove_sector, survival_features
 from gaitlib.transitions.explicit import explicit_state
 
 __all__ = ["CatchEvent", "Guard", "GuardReading", "catch_summary"]
@@ -99,8 +99,8 @@ class Guard:
         stay = self.estimate.probability(features, gait).to(env.device)
         offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
         if (table := self.estimate.catch_into) is not None:  # only the table's gait is offered (none: -1)
-            into = torch.tensor([table.get(g, -1) for g in range(len(env.clips))], device=offer.device)
-            into = into[gait.to(offer.device)]
+            sector = shove_sector(env.trunk_acceleration[ids]).to(offer.device)
+            into = table.to(offer.device)[gait.to(offer.device), sector]
             other = torch.arange(offer.shape[1], device=offer.device) != into.unsqueeze(1)
             offer = offer.masked_fill(other, float("nan"))
         armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6

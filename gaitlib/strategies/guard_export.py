@@ -5,18 +5,22 @@ Written into one folder:
 
 * ``latent_GAIT.onnx`` per gait: the actor observation (N, its width) to the actor's last hidden layer psi_m (N, L),
   the actor's observation normalizer included (the same observation ``GAIT/policy.onnx`` reads);
-* ``survival.onnx``: the survival estimate's inputs (N, G + L + 2: one-hot gait, psi_m, sin and cos of 2 pi phase)
-  to its logit (standardization included);
+* ``survival.onnx``: the survival estimate's inputs (N, G + L + 2, or + 5 with ``imu``: one-hot gait, psi_m, sin
+  and cos of 2 pi phase, then the trunk's acceleration in its own frame, gravity left out, m/s^2) to its logit
+  (standardization included);
 * ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
   to its logit;
-* ``guard.json``: the gaits, the policies' identities, the estimate's horizon, margin, the time from an episode's
-  start before which it does not act (``armed_from_s``, s), the catch table (``catch_into``: running gait -> the
-  gait it is caught into; null: the gait offered most) and Platt (a, b) per gait
+* ``guard.json``: the gaits, the policies' identities, the estimate's inputs, horizon, margin, the time from an
+  episode's start before which it does not act (``armed_from_s``, s), the catch table (``catch_into``: running
+  gait -> sector of ``sectors`` the trunk's acceleration points to -> the gait it is caught into; a gait or sector
+  it lacks is never caught; null: the gait offered most) and Platt (a, b) per gait
   (``sigmoid(a * logit + b)``), the net's calibration per ordered pair (``sigmoid(a * logit(clip(sigmoid(z),
   1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
 
 An estimate that reads the critic's value is refused in one line: the critic sees privileged simulator quantities a
 robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``).
+``imu`` is deployable: a robot's IMU gives it (the accelerometer less the gravity its attitude estimate gives, or
+the change of the estimated trunk velocity over the control step, divided by the step, in the trunk's frame).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import torch
 
 from gaitlib.atomic import atomic_path, write_json
 from gaitlib.errors import GaitlibError
+from gaitlib.evaluation import SECTORS
 from gaitlib.strategies.base import phase_grid
 from gaitlib.strategies.calibration import Calibration
 from gaitlib.strategies.survival import SurvivalEstimate
@@ -35,9 +40,9 @@ from gaitlib.transition_net.model import TransitionNet
 
 __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
 
-DEPLOYABLE_INPUTS = ("latent", "phase")
-"""The only survival inputs a robot-side loop computes from its own observations."""
-_FORMAT = {"format": "gaitlib.guard_export", "format_version": 2}  # 2: armed_from_s, catch_into
+DEPLOYABLE_INPUTS = (("latent", "phase"), ("latent", "phase", "imu"))
+"""The survival inputs a robot-side loop computes from its own observations and IMU."""
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 3}  # 2: armed_from_s, catch_into; 3: imu, sectors
 
 
 class _Latent(torch.nn.Module):
@@ -65,10 +70,10 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
     """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
     :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
     ``guard.json``."""
-    if tuple(estimate.inputs) != DEPLOYABLE_INPUTS:
+    if tuple(estimate.inputs) not in DEPLOYABLE_INPUTS:
         raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "
-                           f"{' and '.join(DEPLOYABLE_INPUTS)} (the critic's value reads privileged simulator "
-                           "quantities): fit it with gaitlib survival fit --inputs latent,phase")
+                           "latent, phase and imu (the critic's value reads privileged simulator quantities): fit "
+                           "it with gaitlib survival fit --inputs latent,phase,imu")
     if net.spec.kind != "latent":
         raise GaitlibError(f"the transition-net reads '{net.spec.kind}' inputs; the exported guard needs a latent net")
     folder = Path(folder)
@@ -92,15 +97,19 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
     return write_json(folder / "guard.json", _FORMAT | {
         "gaits": list(gaits),
         "library_identities": estimate.identities,
+        "inputs": list(estimate.inputs),
         "horizon_s": estimate.horizon_s,
         "margin": estimate.margin,
         "armed_from_s": estimate.armed_from_s,
+        "sectors": list(SECTORS),
         "catch_into": None if estimate.catch_into is None else {
-            gaits[g]: gaits[d] for g, d in estimate.catch_into.items()},
+            gaits[g]: {SECTORS[k]: gaits[d] for k, d in enumerate(row.tolist()) if d >= 0}
+            for g, row in enumerate(estimate.catch_into) if (row >= 0).any()},
         "survival_platt": {gaits[k]: list(ab) for k, ab in estimate.platt.items()},
         "net_calibration": {f"{gaits[m]}-{gaits[n]}": list(ab) for (m, n), ab in calibration.pairs.items()},
         "candidates": phase_grid().tolist(),
         "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
-                "catch_into table's gait where there is one) beats the calibrated survival estimate by more than the "
-                "margin, at once; then hold it for horizon_s before the requested gait is switched to again",
+                "catch_into table's gait for the running gait and the sector the trunk's acceleration points to, "
+                "where there is a table) beats the calibrated survival estimate by more than the margin, at once; "
+                "then hold it for horizon_s before the requested gait is switched to again",
     }, checksum=True)

@@ -27,6 +27,7 @@ import torch
 
 from gaitlib.atomic import file_sha256, torch_bytes, write_bytes
 from gaitlib.errors import GaitlibError, TransitionDataError
+from gaitlib.evaluation import SECTORS, sector_of
 from gaitlib.library.layout import check_identities, is_shipped
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import platt
@@ -35,7 +36,7 @@ from gaitlib.values import GUARD_HORIZON_S
 __all__ = [
     "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "SurvivalNet",
     "check_guard",
-    "fit_survival", "load_survival", "save_catch_table", "save_survival", "survival_features",
+    "fit_survival", "load_survival", "save_catch_table", "save_survival", "shove_sector", "survival_features",
 ]
 
 SURVIVAL_FILE = Library.SURVIVAL
@@ -82,6 +83,12 @@ def survival_features(inputs: tuple[str, ...], gaits: int, *, gait: torch.Tensor
     return torch.cat(parts, dim=-1)
 
 
+def shove_sector(acceleration: torch.Tensor) -> torch.Tensor:
+    """(k,) index into :data:`~gaitlib.evaluation.SECTORS` of where each trunk is pushed: the direction of the
+    horizontal part of its acceleration (k, 3) in its own frame, m/s^2 (an IMU's, gravity left out)."""
+    return sector_of(torch.atan2(acceleration[:, 1], acceleration[:, 0]))
+
+
 class SurvivalNet(torch.nn.Module):
     """MLP over standardized inputs, hidden 64-64 with ReLU, one logit."""
 
@@ -125,13 +132,21 @@ class SurvivalEstimate:
         return float(self.info.get("armed_from_s", 0.0))
 
     @property
-    def catch_into(self) -> dict[int, int] | None:
-        """Running gait -> the gait the guard catches it into (the catch table, ``gaitlib survival catches``; a gait
-        it lacks is never caught; ``None``: no table, the gait the transition-net offers most)."""
+    def catch_into(self) -> torch.Tensor | None:
+        """(G, len(SECTORS)) long: the gait the guard catches each running gait into, by the sector of
+        :data:`~gaitlib.evaluation.SECTORS` its trunk is pushed toward (:func:`shove_sector`); -1 where it is never
+        caught (the catch table, ``gaitlib survival catches``). A table that names one gait for a running gait
+        catches it there whatever the direction. ``None``: no table, the gait the transition-net offers most."""
         table = self.info.get("catches")
         if table is None:
             return None
-        return {self.gaits.index(g): self.gaits.index(d) for g, d in table["catch_into"].items()}
+        into = torch.full((len(self.gaits), len(SECTORS)), -1, dtype=torch.long)
+        for gait, row in table["catch_into"].items():
+            for k, sector in enumerate(SECTORS):
+                dest = row if isinstance(row, str) else row.get(sector)
+                if dest is not None:
+                    into[self.gaits.index(gait), k] = self.gaits.index(dest)
+        return into
 
     @torch.inference_mode()
     def probability(self, features: torch.Tensor, gait: torch.Tensor) -> torch.Tensor:
