@@ -59,6 +59,16 @@ def test_collect_resume_fit_and_evaluate(library, tmp_path) -> None:
     written = json.loads((library / "switching" / "accuracy.json").read_text())
     assert written == report | {"checksum": written["checksum"]}
 
+    before = {p.name: p.read_bytes() for p in (library / "switching").iterdir()}
+    curve = gaitlib_quick("fit", "--curve", "4,16", "--data", data, "--epochs", "3", "--library", lib, "--json")
+    assert curve.returncode == 0, curve.stderr
+    points = json.loads(curve.stdout)["points"]
+    assert [p["samples_per_pair"] for p in points] == [4, 16] and points[0]["trained_on"] <= points[1]["trained_on"]
+    assert {p.name: p.read_bytes() for p in (library / "switching").iterdir()} == before  # it writes nothing
+    for bad in (["--curve", "0"], ["--curve", "8", "--replace"]):
+        refused = gaitlib_quick("fit", *bad, "--data", data, "--library", lib)
+        assert refused.returncode != 0 and refused.stderr.count("\n") == 1, refused.stderr
+
     scored = gaitlib_quick("fit", "--evaluate", "--data", data, "--library", lib, "--json")
     assert scored.returncode == 0, scored.stderr
     accuracy = json.loads(scored.stdout)["accuracy"]

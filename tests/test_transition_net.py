@@ -17,6 +17,7 @@ from gaitlib.transition_net import (
     batch_features,
     build_features,
     fit,
+    learning_curve,
     load_net,
     read_metadata,
     save_net,
@@ -148,3 +149,16 @@ def test_loading_for_another_library_is_refused(tmp_path) -> None:
         load_net(garbage, identities=IDENTITIES)
     with pytest.raises(TransitionDataError, match="no transition-net"):
         load_net(tmp_path / "missing.pt", identities=IDENTITIES)
+
+
+def test_the_learning_curve_scores_nested_fits_on_samples_none_of_them_saw() -> None:
+    data = separable(n_per_class_pair=100)  # 200 samples a pair; the sign of one latent value decides
+    config = FitConfig(epochs=40, batch_size=16, seed=2)
+    points = learning_curve(data, [2, 40, 160], config=config)
+    assert [p.samples_per_pair for p in points] == [2, 40, 160]
+    assert points[0].trained_on < points[1].trained_on < points[2].trained_on <= 2 * 160 * 0.8 + 4
+    assert set(points[-1].accuracy) == {"stand-trot", "trot-stand"} and points[-1].mean_accuracy >= 0.95
+    # Held out once, before any fit: the same 40 samples of each label score every point (20% of 200 a pair).
+    held_out = [learning_curve(data, [160], config=config, test_fraction=f)[0] for f in (0.2, 0.5)]
+    assert held_out[0].as_dict() == points[-1].as_dict() and held_out[1].trained_on < held_out[0].trained_on
+    assert learning_curve(data, [40], config=config)[0].as_dict() == points[1].as_dict()  # one seed, one curve

@@ -203,6 +203,11 @@ def fit_command(
     seed: int = bounded(0, "--seed", help="Random seed;", bounds=SEED),
     ablation: bool = typer.Option(False, "--ablation", help="Fit all three inputs and compare with the paper."),
     evaluate: bool = typer.Option(False, "--evaluate", help="Score the library's net on --data instead of fitting."),
+    curve: str | None = typer.Option(
+        None, "--curve", help="Measure the learning curve instead of fitting (writes nothing): held-out accuracy "
+        "per pair of a net fitted on the first N collected samples of each pair, for each N of this list or "
+        "START:STOP:STEP (docs/transitions.md, \"Growing the library\")."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     library: Path | None = typer.Option(
         None, "--library", help="Library to fit into (default: $GAITLIB_LIBRARY, else your own runs/library, made "
@@ -225,8 +230,14 @@ def fit_command(
     from gaitlib.transition_net import INPUT_KINDS
     from gaitlib.transitions import read_all
 
-    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label"), when=evaluate,
+    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve"), when=evaluate,
               because="with --evaluate (it scores the library's net and fits nothing)")
+    if curve is not None:
+        no_effect(ctx, ("replace", "ablation", "min_per_label"), when=True,
+                  because="with --curve (it fits into no library)")
+        _curve(data, curve, library=library, input_kind=input_kind, epochs=epochs, seed=seed, falls=falls,
+               as_json=as_json)
+        return
     if evaluate:
         lib = Library(library)
         samples = read_all(data, current=lib.identities())
@@ -253,6 +264,47 @@ def fit_command(
             print(f"stale now: the route table {lib.switching_dir / Library.ROUTES} was measured with the switching "
                   f"models this fit replaced; gaitlib library --library {lib.root} gives the command that measures it "
                   "again")
+
+
+def _curve(data: list[Path], sizes: str, *, library: Path | None, input_kind: str, epochs: int, seed: int,
+           falls: str, as_json: bool) -> None:
+    """``gaitlib fit --curve``: the learning curve of the net on ``data`` (nothing written)."""
+    import sys
+
+    from gaitlib.library import Library
+    from gaitlib.transition_net import INPUT_KINDS, FitConfig, learning_curve
+    from gaitlib.transitions import read_all
+    from gaitlib.values import parse_values
+
+    counts = parse_values(sizes, option="--curve", bounds=Bounds(low=1, high=1e7, whole=True), example="250,500,1000")
+    if input_kind not in INPUT_KINDS:
+        from gaitlib.errors import UnknownNameError
+
+        raise UnknownNameError("input", input_kind, list(INPUT_KINDS))
+    samples = read_all(data, current=Library(library).identities())  # foreign data: refused before any fit
+    config = FitConfig(kind=input_kind, epochs=epochs, seed=seed, falls=falls)
+    points = learning_curve(samples, [int(n) for n in counts], config=config, progress=lambda p: print(
+        f"{p.samples_per_pair} samples per pair: mean held-out accuracy {100 * p.mean_accuracy:.2f}%", file=sys.stderr,
+        flush=True))
+    result = {"data": [str(d) for d in data], "input": input_kind, "epochs": epochs, "seed": seed, "falls": falls,
+              "test_fraction": 0.2, "points": [p.as_dict() for p in points]}
+    if as_json:
+        print(json_text(result))
+        return
+    from rich.table import Table
+
+    from gaitlib.cli.tables import table_console
+
+    table = Table(title=f"learning curve: held-out balanced accuracy (%) per ordered pair against the samples "
+                        f"collected per pair ({input_kind} net, labels by the {falls} definition of a fall)")
+    table.add_column("pair")
+    for p in points:
+        table.add_column(str(p.samples_per_pair), justify="right")
+    for pair in sorted({pair for p in points for pair in p.accuracy}):
+        table.add_row(pair, *(f"{100 * p.accuracy[pair]:.2f}" if pair in p.accuracy else "-" for p in points))
+    table.add_row("mean", *("-" if math.isnan(p.mean_accuracy) else f"{100 * p.mean_accuracy:.2f}" for p in points))
+    table.add_row("trained on", *(str(p.trained_on) for p in points))
+    table_console().print(table)
 
 
 def _report(report: dict, as_json: bool) -> None:

@@ -1,7 +1,8 @@
 """The transition-net: predicts whether switching from gait m to gait n at destination phase phi_n succeeds, from
 the source policy's latent (or, as ablations, the phases or the explicit state). Features, model, balanced
-dataset, fitting, and storage."""
+dataset, fitting, its learning curve, and storage."""
 
+from gaitlib.transition_net.curve import CurvePoint, learning_curve
 from gaitlib.transition_net.dataset import BalancedSplit, balanced_split
 from gaitlib.transition_net.evaluate import evaluate_net
 from gaitlib.transition_net.features import INPUT_KINDS, FeatureSpec, batch_features, build_features
@@ -12,6 +13,7 @@ from gaitlib.transition_net.storage import SavedNet, load_net, read_metadata, sa
 __all__ = [
     "INPUT_KINDS",
     "BalancedSplit",
+    "CurvePoint",
     "EpochStats",
     "FeatureSpec",
     "FitConfig",
@@ -23,6 +25,7 @@ __all__ = [
     "build_features",
     "evaluate_net",
     "fit",
+    "learning_curve",
     "load_net",
     "read_metadata",
     "save_net",
