@@ -56,8 +56,9 @@ def fit_command(
     horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]: "
                                  "START:STOP:STEP or a list."),
     margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
-    inputs: str = typer.Option("latent,phase", "--inputs", help="Inputs besides the gait: latent, phase, value (the "
-                               "critic's, privileged: not exportable to a robot), explicit."),
+    inputs: str = typer.Option("latent,phase,imu", "--inputs", help="Inputs besides the gait: latent, phase, imu "
+                               "(the trunk's acceleration, as an IMU reads it), value (the critic's, privileged: not "
+                               "exportable to a robot), explicit."),
     epochs: int = bounded(20, "--epochs", help="Training epochs;", bounds=COUNT),
     seed: int = bounded(0, "--seed", help="Split and training seed;", bounds=SEED),
     library: Path | None = typer.Option(
