@@ -24,6 +24,13 @@ Newton 1.8 facts this module relies on (read from its source):
 
 All tensors stay on the device; :meth:`NewtonBackend.step` reads one pair of flags back to the host (capacity
 overflow, divergence) and :meth:`NewtonBackend.reset` and the ``set_*`` commands one validity flag each.
+
+A control step's substeps run as one captured Warp graph (a CUDA graph on a GPU), the way mujoco_warp's and
+Newton's own examples step: launching their kernels one by one costs most of a step's time (``benchmarks/
+gpu_check.py``, ``sim``). The first step runs them eagerly, which loads the kernels, and captures them; later steps
+replay the capture. A graph holds the addresses of the arrays it reads and writes, so the backend checks after every
+model change (``set_pd_gains``, ``set_dynamics``) that no array moved, and captures again where one did. Where
+capture fails, every step runs eagerly.
 """
 
 from __future__ import annotations
@@ -57,6 +64,28 @@ _CAPACITY_BITS = (
 """Overflow bits that mean lost contacts or constraints (solver iteration limits are not errors)."""
 
 
+@wp.kernel
+def _fold_overflow_kernel(seen: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32), first: int):
+    """``seen`` = the OR of every substep's per-world overflow bits ``flags`` (the first substep's replaces it)."""
+    i = wp.tid()
+    if first != 0:
+        seen[i] = flags[i]
+    else:
+        seen[i] = seen[i] | flags[i]
+
+
+def _array_addresses(*owners) -> tuple[int, ...]:
+    """The address of every Warp array held by ``owners`` and by the structs they hold (one level down)."""
+    found = []
+    for owner in owners:
+        for value in vars(owner).values():
+            if isinstance(value, wp.array):
+                found.append(value.ptr or 0)
+            elif hasattr(value, "__dict__") and not callable(value):
+                found += [v.ptr or 0 for v in vars(value).values() if isinstance(v, wp.array)]
+    return tuple(found)
+
+
 class NewtonBackend(NewtonConstruction, SimBackend):
     """N robot worlds in one Newton model, stepped by ``SolverMuJoCo`` (mujoco_warp) on a CUDA GPU or the CPU.
 
@@ -85,6 +114,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         self._contacts_per_world = contacts_per_world
         mj = load_model(robot)  # the MJCF as MuJoCo C compiles it: checks it and gives the solver options
         self._dt = float(mj.opt.timestep)
+        self._graph, self._addresses, self._eager_only = None, (), False
         with wp.ScopedDevice(self._wp_device):
             self._build(robot, mj)
         self.reset(torch.arange(num_worlds, device=self.device), standing_state(robot, num_worlds, device=self.device))
@@ -136,6 +166,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         self._kd[rows, self._joint_dofs] = kd
         with self.warp_scope():
             self._solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+        self._check_graph()
 
     def set_dynamics(
         self,
@@ -166,6 +197,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
                 | newton.ModelFlags.BODY_INERTIAL_PROPERTIES
                 | newton.ModelFlags.SHAPE_PROPERTIES
             )
+        self._check_graph()
 
     def set_trunk_force(self, world_ids: torch.Tensor, force: torch.Tensor) -> None:
         ids = self._ids(world_ids)
@@ -177,12 +209,13 @@ class NewtonBackend(NewtonConstruction, SimBackend):
 
     def step(self) -> torch.Tensor:
         with self.warp_scope():
-            self._overflow_seen.zero_()
-            for _ in range(self.substeps):
-                self._solver.step(
-                    self._state, self._state, self._control, None, self._dt, observables=self._observables
-                )
-                self._overflow_seen |= self._overflow
+            if self._graph is not None:
+                wp.capture_launch(self._graph)
+            else:
+                self._substeps()
+        if self._graph is None and not self._eager_only:
+            self._capture()
+        with self.warp_scope():
             diverged = ~(
                 (self._qpos.abs() <= _DIVERGENCE_LIMIT).all(dim=1) & (self._qvel.abs() <= _DIVERGENCE_LIMIT).all(dim=1)
             )
@@ -219,6 +252,34 @@ class NewtonBackend(NewtonConstruction, SimBackend):
             del self.__dict__[name]
 
     # ----------------------------------------------------------------------------------------- internals
+    def _substeps(self) -> None:
+        """One control step's substeps and the OR of their overflow bits, on the current Warp device and stream."""
+        for k in range(self.substeps):
+            self._solver.step(self._state, self._state, self._control, None, self._dt, observables=self._observables)
+            wp.launch(_fold_overflow_kernel, dim=self.num_worlds,
+                      inputs=[self._wp_overflow_seen, self._observables.overflow, int(k == 0)])
+
+    def _capture(self) -> None:
+        """Capture :meth:`_substeps` as one graph (kernels loaded by an eager step first); on CUDA on Warp's own
+        stream, as torch's default stream cannot be captured, and replayed on torch's (see :meth:`warp_scope`)."""
+        wp.synchronize_device(self._wp_device)
+        try:
+            with wp.ScopedDevice(self._wp_device), wp.ScopedCapture(force_module_load=False) as capture:
+                self._substeps()
+        except Exception:  # Warp raises several types where a capture is not possible: step eagerly
+            self._eager_only = True
+            return
+        self._graph, self._addresses = capture.graph, self._arrays()
+
+    def _arrays(self) -> tuple[int, ...]:
+        return _array_addresses(self._solver.mjw_model, self._solver.mjw_data, self._state, self._control,
+                                self._observables, self._model)
+
+    def _check_graph(self) -> None:
+        """Drop the captured step where a model change moved an array it uses (it is captured again next step)."""
+        if self._graph is not None and self._arrays() != self._addresses:
+            self._graph = None
+
     @property
     def mujoco_warp(self) -> tuple:
         """The ``mujoco_warp`` (Model, Data) this backend steps, for references that step them without Newton or

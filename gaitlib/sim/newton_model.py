@@ -255,7 +255,8 @@ class NewtonConstruction:
         self._xpos = wp.to_torch(data.xpos)
         self._xmat = wp.to_torch(data.xmat)
         self._overflow = wp.to_torch(self._observables.overflow)
-        self._overflow_seen = torch.zeros_like(self._overflow)
+        self._wp_overflow_seen = wp.zeros_like(self._observables.overflow)
+        self._overflow_seen = wp.to_torch(self._wp_overflow_seen)
 
     def _take_mujoco_inertial_frames(self) -> None:
         """MuJoCo's compiler puts a massless body's inertial frame (the feet here) at the body's offset from its
