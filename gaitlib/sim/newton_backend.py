@@ -48,7 +48,13 @@ from gaitlib.robots import RobotSpec
 from gaitlib.rotations import quat_rotate
 from gaitlib.sim.contract import KinematicState, SimBackend, SimState, standing_state
 from gaitlib.sim.mujoco_backend import load_model
-from gaitlib.sim.newton_model import NewtonConstruction, ground_contacts_kernel, resolve_device
+from gaitlib.sim.newton_model import (
+    NewtonConstruction,
+    array_addresses,
+    fold_overflow_kernel,
+    ground_contacts_kernel,
+    resolve_device,
+)
 
 __all__ = ["NewtonBackend"]
 
@@ -62,28 +68,6 @@ _CAPACITY_BITS = (
     & ~int(mujoco_warp.OverflowType.ITERATIONS | mujoco_warp.OverflowType.LS_ITERATIONS)
 ) | int(SolverMuJoCo.OverflowBits.SOLVER_NCONMAX | SolverMuJoCo.OverflowBits.CONTACT_PIPELINE)
 """Overflow bits that mean lost contacts or constraints (solver iteration limits are not errors)."""
-
-
-@wp.kernel
-def _fold_overflow_kernel(seen: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32), first: int):
-    """``seen`` = the OR of every substep's per-world overflow bits ``flags`` (the first substep's replaces it)."""
-    i = wp.tid()
-    if first != 0:
-        seen[i] = flags[i]
-    else:
-        seen[i] = seen[i] | flags[i]
-
-
-def _array_addresses(*owners) -> tuple[int, ...]:
-    """The address of every Warp array held by ``owners`` and by the structs they hold (one level down)."""
-    found = []
-    for owner in owners:
-        for value in vars(owner).values():
-            if isinstance(value, wp.array):
-                found.append(value.ptr or 0)
-            elif hasattr(value, "__dict__") and not callable(value):
-                found += [v.ptr or 0 for v in vars(value).values() if isinstance(v, wp.array)]
-    return tuple(found)
 
 
 class NewtonBackend(NewtonConstruction, SimBackend):
@@ -256,7 +240,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         """One control step's substeps and the OR of their overflow bits, on the current Warp device and stream."""
         for k in range(self.substeps):
             self._solver.step(self._state, self._state, self._control, None, self._dt, observables=self._observables)
-            wp.launch(_fold_overflow_kernel, dim=self.num_worlds,
+            wp.launch(fold_overflow_kernel, dim=self.num_worlds,
                       inputs=[self._wp_overflow_seen, self._observables.overflow, int(k == 0)])
 
     def _capture(self) -> None:
@@ -272,7 +256,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
         self._graph, self._addresses = capture.graph, self._arrays()
 
     def _arrays(self) -> tuple[int, ...]:
-        return _array_addresses(self._solver.mjw_model, self._solver.mjw_data, self._state, self._control,
+        return array_addresses(self._solver.mjw_model, self._solver.mjw_data, self._state, self._control,
                                 self._observables, self._model)
 
     def _check_graph(self) -> None:

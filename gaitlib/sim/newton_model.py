@@ -25,7 +25,9 @@ if TYPE_CHECKING:
 __all__ = [
     "NewtonConstruction",
     "RobotTemplate",
+    "array_addresses",
     "find",
+    "fold_overflow_kernel",
     "geom_roles",
     "ground_contacts_kernel",
     "make_solver",
@@ -37,6 +39,28 @@ _ROLE_OTHER = wp.constant(-1)
 """Contact role of a geom that is neither the floor nor part of the robot."""
 _ROLE_FLOOR = wp.constant(-2)
 """Contact role of the floor geom (feet are 0..F-1, the legs' other geoms F, the trunk's F + 1)."""
+
+
+@wp.kernel
+def fold_overflow_kernel(seen: wp.array(dtype=wp.int32), flags: wp.array(dtype=wp.int32), first: int):
+    """``seen`` = the OR of every substep's per-world overflow bits ``flags`` (the first substep's replaces it)."""
+    i = wp.tid()
+    if first != 0:
+        seen[i] = flags[i]
+    else:
+        seen[i] = seen[i] | flags[i]
+
+
+def array_addresses(*owners) -> tuple[int, ...]:
+    """The address of every Warp array held by ``owners`` and by the structs they hold (one level down)."""
+    found = []
+    for owner in owners:
+        for value in vars(owner).values():
+            if isinstance(value, wp.array):
+                found.append(value.ptr or 0)
+            elif hasattr(value, "__dict__") and not callable(value):
+                found += [v.ptr or 0 for v in vars(value).values() if isinstance(v, wp.array)]
+    return tuple(found)
 
 
 @wp.kernel
