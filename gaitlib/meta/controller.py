@@ -127,6 +127,9 @@ class MetaController:
         """(N,) the gait a caught world returns to, -1 where none is pending."""
         self.hold = torch.zeros(n, dtype=torch.long, device=env.device)
         """(N,) control steps a caught world still holds the gait it was caught into."""
+        self.settle = torch.zeros(n, dtype=torch.long, device=env.device)
+        """(N,) control steps the guard still leaves a world alone after a switch the strategy chose (not a forced
+        one): the score that chose it counted the horizon after it, as a catch's offer does."""
         self._hold_steps = round(guard.horizon_s / env.dt) if guard is not None else 0
         self.stay = torch.full((n,), float("nan"), device=env.device)
         """(N,) the survival estimate the guard read at the last step (NaN unguarded)."""
@@ -178,6 +181,7 @@ class MetaController:
             if go.any():
                 chosen = ids[go]
                 env.switch(chosen, self.queued[chosen], decision.phase[go])
+                self.settle[ids[decision.switch]] = self._hold_steps + 1  # counted down at this step's end too
                 if self.on_switch is not None:
                     self.on_switch(
                         SwitchDetail(
@@ -213,12 +217,13 @@ class MetaController:
 
     def _guard(self, events: list[SwitchEvent]) -> list[CatchEvent]:
         """Catch every world whose best offer beats staying by more than the margin, at once (not one that still
-        holds the gait of its last catch: the net's offer already counted the horizon after that switch); a catch
-        into the queued gait is that request's switch (an event of ``events``)."""
+        holds the gait of its last catch, nor one within the horizon after a switch its strategy chose: the score of
+        that switch already counted the horizon after it); a catch into the queued gait is that request's switch (an
+        event of ``events``)."""
         env = self.env
         ids = torch.arange(env.num_envs, device=env.device)
         reading = self.guard.read(env, self.policies, ids, self.candidates)
-        fire = self.guard.fires(reading) & (self.hold <= 0)  # a caught world holds its new gait for the horizon
+        fire = self.guard.fires(reading) & (self.hold <= 0) & (self.settle <= 0)  # the horizon after a switch
         self.stay = reading.stay
         if not fire.any():
             return []
@@ -261,7 +266,8 @@ class MetaController:
         runs again. A world that ended its episode forgets its catch."""
         env = self.env
         self.hold = (self.hold - 1).clamp(min=0)
-        self.hold[dones] = 0
+        self.settle = (self.settle - 1).clamp(min=0)
+        self.hold[dones], self.settle[dones] = 0, 0
         self.requested[dones] = -1
         for world in dones.nonzero().squeeze(1).tolist():
             self._pending.pop(world, None)
