@@ -111,5 +111,6 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
                 "catch_into table's gait for the running gait and the sector the trunk's acceleration points to, "
                 "where there is a table) beats the calibrated survival estimate by more than the margin, at once; "
-                "then hold it for horizon_s before the requested gait is switched to again",
+                "then hold it for horizon_s before the requested gait is switched to again; after a switch your "
+                "switching rule chose, do not catch for horizon_s either",
     }, checksum=True)
