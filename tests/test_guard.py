@@ -236,7 +236,7 @@ def test_the_catch_table_catches_by_the_direction_the_trunk_is_pushed(switching_
 
 def test_the_guard_leaves_a_world_alone_for_the_horizon_after_its_strategy_switches(switching_library):
     setup = load_switching(switching_library)
-    catches, gaits, ctl = _run(setup, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), 45, margin=0.0)
+    catches, _, ctl = _run(setup, _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6}), 45, margin=0.0)
     hold = round(0.2 / ctl.env.dt)
     returned = [c for c in catches if c.step == 0 and c.back_step is not None]
     assert returned
