@@ -153,7 +153,7 @@ def test_loading_for_another_library_is_refused(tmp_path) -> None:
 
 def test_the_learning_curve_scores_nested_fits_on_samples_none_of_them_saw() -> None:
     data = separable(n_per_class_pair=100)  # 200 samples a pair; the sign of one latent value decides
-    config = FitConfig(epochs=40, batch_size=16, seed=2)
+    config = FitConfig(epochs=20, batch_size=16, seed=2)
     points = learning_curve(data, [2, 40, 160], config=config)
     assert [p.samples_per_pair for p in points] == [2, 40, 160]
     assert points[0].trained_on < points[1].trained_on < points[2].trained_on <= 2 * 160 * 0.8 + 4
