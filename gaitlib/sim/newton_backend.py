@@ -29,8 +29,8 @@ A control step's substeps run as one captured Warp graph (a CUDA graph on a GPU)
 Newton's own examples step: launching their kernels one by one costs most of a step's time (``benchmarks/
 gpu_check.py``, ``sim``). The first step runs them eagerly, which loads the kernels, and captures them; later steps
 replay the capture. A graph holds the addresses of the arrays it reads and writes, so the backend checks after every
-model change (``set_pd_gains``, ``set_dynamics``) that no array moved, and captures again where one did. Where
-capture fails, every step runs eagerly.
+model change (``set_pd_gains``, ``set_dynamics``) and every reset that no array moved, and captures again where one
+did. Where capture fails, every step runs eagerly.
 """
 
 from __future__ import annotations
@@ -336,6 +336,7 @@ class NewtonBackend(NewtonConstruction, SimBackend):
             mujoco_warp.fwd_kinematics(self._solver.mjw_model, self._solver.mjw_data)
             mujoco_warp.collision(self._solver.mjw_model, self._solver.mjw_data)
             self._read_contacts_and_feet(mask)
+        self._check_graph()  # the solver's reset and kinematics ran outside the graph
 
     def _read_contacts_and_feet(self, mask: torch.Tensor | None) -> None:
         """Copy foot, body and trunk contacts and foot positions from mujoco_warp's data (rows ``mask`` or all)."""
