@@ -100,11 +100,9 @@ def test_a_measurement_of_other_switching_models_is_not_resumed_or_reused(switch
     from gaitlib.strategies.fitting import fit_library
     from gaitlib.transitions import read
 
-    data = tmp_path / "t.h5"
-    collected = gaitlib_quick("collect", "--library", str(library.root), "--samples", "8", "--worlds", "4",
-                              "--horizon", "1.0", "--backend", "mujoco", "--out", str(data))
-    assert collected.returncode == 0, collected.stderr
+    data = Path(switching_library).parent / "samples.h5"  # the fixture's collection: both labels on some pair
     fit_library(library, read(data), sources=[data], epochs=1, seed=7, min_per_label=0)  # other switching models
+    assert library.switching_identity() != table["switching"]
     again = gaitlib_quick(*args)
     assert again.returncode == 2 and again.stderr.count("\n") == 1
     assert "holds a benchmark with other settings (switching)" in again.stderr
