@@ -210,3 +210,10 @@ def test_fitting_into_a_folder_that_is_not_a_library_names_the_folder_not_the_da
     _refused(gaitlib_quick("fit", "--library", "notalib", "--data", "missing.h5"),
              f"gaitlib fit: notalib is not a library ({state}); give --library a folder of trained gaits, or leave "
              "it out to write into your own library (runs/library)")
+
+
+@pytest.mark.parametrize("extra", [[], ["--curve", "4,8"]], ids=["fit", "curve"])
+def test_an_unknown_input_kind_is_refused_before_the_library_is_copied(extra, here) -> None:
+    _refused(gaitlib_quick("fit", "--input", "latents", "--data", "missing.h5", *extra),
+             "unknown input 'latents' (known: explicit, latent, phase)")
+    assert list(here.iterdir()) == []

@@ -47,6 +47,21 @@ def test_recorded_states_resume_and_label(recorded):
         record_survival(path, setup, SurvivalRecording(episodes=14, **(SMALL | {"impulse_max_ns": 5.0})))
 
 
+def test_recorded_switches_take_the_nets_best_phase_or_a_uniform_one(recorded, tmp_path):
+    setup = recorded[1]
+    switched = {"switch_share": 1.0, "calm_share": 1.0}
+    uniform = record_survival(tmp_path / "u.h5", setup, SurvivalRecording(episodes=6, switch_phase="uniform",
+                                                                          **(SMALL | switched)))
+    best = record_survival(tmp_path / "b.h5", setup, SurvivalRecording(episodes=6, **(SMALL | switched)))
+    assert read_survival_states(tmp_path / "b.h5")[0]["settings"]["switch_phase"] == "best"
+    first = np.unique(best["episode"], return_index=True)[1]  # each episode's first state: just after its switch
+    assert not np.allclose(best["phase"][first], uniform["phase"][first])  # the same draws, another phase
+    with pytest.raises(GaitlibError, match="other settings"):  # never resumed with the other rule
+        record_survival(tmp_path / "u.h5", setup, SurvivalRecording(episodes=12, **(SMALL | switched)))
+    with pytest.raises(GaitlibError, match="must be one of best, uniform, not 'nearest'"):
+        SurvivalRecording(switch_phase="nearest")
+
+
 def test_fit_choose_save_load(recorded, switching_library, tmp_path):
     path, setup, _, data = recorded
     library = copy_library(Library(switching_library), tmp_path / "library")

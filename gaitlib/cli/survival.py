@@ -27,6 +27,8 @@ def record_command(
     worlds: int = bounded(256, "--worlds", help="Episodes run at once;", bounds=WORLDS),
     impulse_max: float = bounded(30.0, "--impulse-max", help="Largest shove, uniform from 0;",
                                  bounds=Bounds(low=0, high=200, unit="N s")),
+    switch_phase: str = typer.Option("best", "--switch-phase", help="Destination phase of the recorded switches: "
+                                     "best (the calibrated net's, as gaitlib run switches) or uniform."),
     seed: int = bounded(0, "--seed", help="Random seed (batch b runs with seed + b);", bounds=SEED),
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
     falls: str = falls_option(),
@@ -42,7 +44,7 @@ def record_command(
     writable_file("--out", out)
     check_worlds("--worlds", worlds, backend=backend)
     config = SurvivalRecording(episodes=episodes, num_worlds=worlds, impulse_max_ns=impulse_max, seed=seed,
-                               backend=backend, falls=falls)
+                               backend=backend, falls=falls, switch_phase=switch_phase)
     setup = load_switching(library)
     setup.resources.calibration  # noqa: B018 (refuse a library without a calibrated net before any work)
     data = record_survival(out, setup, config, progress=lambda d, t: print(f"{d}/{t} episodes", flush=True))

@@ -227,7 +227,7 @@ def fit_command(
     from gaitlib.library import Library
     from gaitlib.library.target import check_library, copy_library, library_writer
     from gaitlib.strategies.fitting import check_validatable, evaluate_library, fit_library
-    from gaitlib.transition_net import INPUT_KINDS
+    from gaitlib.transition_net import INPUT_KINDS, check_input_kinds
     from gaitlib.transitions import read_all
 
     no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve"), when=evaluate,
@@ -243,6 +243,7 @@ def fit_command(
         samples = read_all(data, current=lib.identities())
         _report(evaluate_library(lib, samples, sources=data, falls=falls), as_json)
         return
+    check_input_kinds((input_kind,))  # before the library is copied
     target, copy_from = writing_library(library, replace=replace, command="gaitlib fit", what="the switching models")
     check_library(copy_from or target, command="gaitlib fit")
     samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
@@ -272,22 +273,19 @@ def _curve(data: list[Path], sizes: str, *, library: Path | None, input_kind: st
     import sys
 
     from gaitlib.library import Library
-    from gaitlib.transition_net import INPUT_KINDS, FitConfig, learning_curve
+    from gaitlib.transition_net import TEST_FRACTION, FitConfig, check_input_kinds, learning_curve
     from gaitlib.transitions import read_all
     from gaitlib.values import parse_values
 
     counts = parse_values(sizes, option="--curve", bounds=Bounds(low=1, high=1e7, whole=True), example="250,500,1000")
-    if input_kind not in INPUT_KINDS:
-        from gaitlib.errors import UnknownNameError
-
-        raise UnknownNameError("input", input_kind, list(INPUT_KINDS))
+    check_input_kinds((input_kind,))
     samples = read_all(data, current=Library(library).identities())  # foreign data: refused before any fit
     config = FitConfig(kind=input_kind, epochs=epochs, seed=seed, falls=falls)
     points = learning_curve(samples, [int(n) for n in counts], config=config, progress=lambda p: print(
         f"{p.samples_per_pair} samples per pair: mean held-out accuracy {100 * p.mean_accuracy:.2f}%", file=sys.stderr,
         flush=True))
     result = {"data": [str(d) for d in data], "input": input_kind, "epochs": epochs, "seed": seed, "falls": falls,
-              "test_fraction": 0.2, "points": [p.as_dict() for p in points]}
+              "test_fraction": TEST_FRACTION, "points": [p.as_dict() for p in points]}
     if as_json:
         print(json_text(result))
         return

@@ -1,12 +1,14 @@
 """Recording the states the survival estimate (:mod:`gaitlib.strategies.survival`) is fitted on.
 
 Each episode runs one world of a library's gaits (drawn uniformly) for ``settle_s``; a share ``switch_share`` of
-them switches before that to another gait at a uniform destination phase (at a uniform moment from 0.3 s on), so
-that the states of a gait just switched into are recorded too. Then, at a uniform moment of the next second, one
-horizontal shove of ``duration_s`` hits the trunk in a uniformly random direction (relative to the heading), of an
-impulse uniform in [0, ``impulse_max_ns``] (exactly 0 in a share ``calm_share`` of the episodes: what false alarms
-are counted on), as ``gaitlib eval --impulses`` shoves; the episode runs ``after_s`` more. A fall is any
-termination before the end by the definition ``falls`` (heading drift is no fall, as in ``eval --impulses``).
+them switches before that to another gait (at a uniform moment from 0.3 s on), so that the states of a gait just
+switched into are recorded too: at the destination phase the calibrated transition-net scores best, as the
+meta-controller switches (``switch_phase="best"``), or at a uniform one (``"uniform"``). Then, at a uniform moment
+of the next second, one horizontal shove of ``duration_s`` hits the trunk in a uniformly random direction (relative
+to the heading), of an impulse uniform in [0, ``impulse_max_ns``] (exactly 0 in a share ``calm_share`` of the
+episodes: what false alarms are counted on), as ``gaitlib eval --impulses`` shoves; the episode runs ``after_s``
+more. A fall is any termination before the end by the definition ``falls`` (heading drift is no fall, as in ``eval
+--impulses``).
 
 Every control step from ``record_from_s`` on, each world that is up and keeps its gait from then on records: its
 gait, phase, actor latent psi_m, critic value, explicit state, trunk acceleration (what an IMU reads,
@@ -15,8 +17,8 @@ transition-net's best destination phase for every other gait, :meth:`LookaheadSt
 shove's start and impulse, the episode's end and the time of its fall (inf: none).
 
 The file (HDF5) is written atomically after each batch of ``num_worlds`` episodes; asked for more episodes, a file
-recorded with the same library and settings resumes (batch b always runs with seed ``seed + b``), so a kill loses
-at most the batch under way.
+recorded with the same library and settings resumes (batch b always runs with seed ``seed + b``), so a kill loses at
+most the batch under way.
 """
 
 from __future__ import annotations
@@ -45,11 +47,13 @@ from gaitlib.sim import make_backend
 from gaitlib.strategies import get_strategy, phase_grid
 from gaitlib.transitions.explicit import explicit_state
 
-__all__ = ["SurvivalRecording", "read_survival_states", "record_survival"]
+__all__ = ["SWITCH_PHASES", "SurvivalRecording", "read_survival_states", "record_survival"]
 
 _FORMAT = "gaitlib.survival_states"
 _COLUMNS = ("episode", "gait", "phase", "latent", "value", "explicit", "imu", "offer", "time_s", "shove_s",
             "impulse_ns", "end_s", "fall_s", "switched")
+SWITCH_PHASES = ("best", "uniform")
+"""How a recorded switch's destination phase is chosen (:attr:`SurvivalRecording.switch_phase`)."""
 _ADDED = ("imu",)
 """Columns that files recorded before them lack: such a file is read (an estimate needing them is refused on it),
 not resumed."""
@@ -68,6 +72,9 @@ class SurvivalRecording:
     """Share of episodes not shoved."""
     switch_share: float = 0.25
     """Share of episodes that switch gaits before the shove."""
+    switch_phase: str = "best"
+    """Destination phase of those switches: ``best`` (the calibrated net's, as the meta-controller switches) or
+    ``uniform``."""
     duration_s: float = 0.1
     """The shove's duration, s."""
     settle_s: float = 1.0
@@ -85,6 +92,9 @@ class SurvivalRecording:
         shares = (self.calm_share, self.switch_share)
         if self.episodes < 1 or self.num_worlds < 1 or not all(0 <= s <= 1 for s in shares):
             raise GaitlibError("episodes and worlds must be at least 1, the calm and switch shares in [0, 1]")
+        if self.switch_phase not in SWITCH_PHASES:
+            raise GaitlibError(f"the switches' destination phase must be one of {', '.join(SWITCH_PHASES)}, not "
+                               f"'{self.switch_phase}'")
         times = (self.impulse_max_ns, self.duration_s, self.settle_s, self.after_s, self.record_from_s)
         if not all(math.isfinite(t) and t >= 0 for t in times) or self.duration_s <= 0 or self.settle_s < 0.3:
             raise GaitlibError("the shove's impulse and times must be finite and not negative, its duration "
@@ -161,7 +171,13 @@ def _batch(setup: SwitchingSetup, config: SurvivalRecording, k: int, *, seed: in
                 now = (switch_at == step).to(dev) & alive
                 if now.any():
                     ids = now.nonzero().squeeze(1)
-                    env.switch(ids, switch_to.to(dev)[ids], switch_phase.to(dev)[ids])
+                    dest, phase = switch_to.to(dev)[ids], switch_phase.to(dev)[ids]
+                    if config.switch_phase == "best":
+                        gait = env.gait[ids]
+                        latent = per_gait(policies, gait, env.get_observations()[ids], method="latent")
+                        _, best = scorer.offers(gait, latent, env.phase[ids], candidates, g)
+                        phase = best.to(dev)[torch.arange(len(ids), device=dev), dest]
+                    env.switch(ids, dest, phase)
                 begins, ends = (start == step).to(dev) & alive, (start + length == step).to(dev) & alive
                 if begins.any():
                     ids = begins.nonzero().squeeze(1)

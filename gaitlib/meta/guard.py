@@ -79,6 +79,7 @@ class Guard:
         self.scorer = scorer
         self.margin = estimate.margin if margin is None else margin
         """A switch is taken where it offers more than staying by more than this."""
+        self._catch_into = estimate.catch_into  # built once: the guard reads it every control step
 
     @property
     def horizon_s(self) -> float:
@@ -98,9 +99,11 @@ class Guard:
                                      explicit=explicit, imu=imu)
         stay = self.estimate.probability(features, gait).to(env.device)
         offer, best_phase = self.scorer.offers(gait, latent, phase, candidates, len(env.clips))
-        if (table := self.estimate.catch_into) is not None:  # only the table's gait is offered (none: -1)
+        if (table := self._catch_into) is not None:  # only the table's gait is offered (none: -1)
+            if table.device != offer.device:
+                self._catch_into = table = table.to(offer.device)
             sector = shove_sector(env.trunk_acceleration[ids]).to(offer.device)
-            into = table.to(offer.device)[gait.to(offer.device), sector]
+            into = table[gait.to(offer.device), sector]
             other = torch.arange(offer.shape[1], device=offer.device) != into.unsqueeze(1)
             offer = offer.masked_fill(other, float("nan"))
         armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6

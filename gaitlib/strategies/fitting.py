@@ -18,12 +18,21 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL, Falls
-from gaitlib.errors import TransitionDataError, UnknownNameError
+from gaitlib.errors import TransitionDataError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import calibrate, save_calibration
 from gaitlib.strategies.tmt import build_table, save_table
-from gaitlib.transition_net import INPUT_KINDS, EpochStats, FitConfig, FitResult, evaluate_net, fit, load_net, save_net
+from gaitlib.transition_net import (
+    EpochStats,
+    FitConfig,
+    FitResult,
+    check_input_kinds,
+    evaluate_net,
+    fit,
+    load_net,
+    save_net,
+)
 from gaitlib.transitions import TransitionData
 
 __all__ = [
@@ -124,11 +133,7 @@ def fit_library(
     so ``gaitlib library`` then calls it stale and gives the command that measures it again. ``on_epoch(kind,
     stats)`` reports progress.
     """
-    for kind in inputs:
-        if kind not in INPUT_KINDS:
-            raise UnknownNameError("input", kind, list(INPUT_KINDS))
-    if not inputs:
-        raise UnknownNameError("input", "", list(INPUT_KINDS))
+    check_input_kinds(inputs)
     identities = _checked_identities(library, data, sources)
     check_validatable(data, falls=falls, min_per_label=min_per_label)
     results = {}

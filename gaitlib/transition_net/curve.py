@@ -1,11 +1,12 @@
 """The transition-net's learning curve: held-out accuracy against the samples collected per ordered pair.
 
 A library that grows collects only its new pairs; how many samples each needs is read from this curve, measured on
-pairs already collected. Per ordered pair, a share of the collected samples (``test_fraction``, drawn once from
-``seed``) is held out. For each size n, the net is fitted as ``gaitlib fit`` fits it (its own balanced split) on the
-first n of each pair's other samples, in one seeded order, so that each set holds the smaller ones, as a shorter
-collection's would; it is scored on the held-out samples, balanced per pair by sub-sampling the larger label class
-(:func:`~gaitlib.transition_net.evaluate.evaluate_net`). A pair whose held-out samples lack a label has no accuracy.
+pairs already collected. Per ordered pair, a share of the collected samples (``test_fraction``, by default
+:data:`TEST_FRACTION`, drawn once from ``seed``) is held out. For each size n, the net is fitted as ``gaitlib fit``
+fits it (its own balanced split) on the first n of each pair's other samples, in one seeded order, so that each set
+holds the smaller ones, as a shorter collection's would; it is scored on the held-out samples, balanced per pair by
+sub-sampling the larger label class (:func:`~gaitlib.transition_net.evaluate.evaluate_net`). A pair whose held-out
+samples lack a label has no accuracy.
 """
 
 from __future__ import annotations
@@ -22,7 +23,11 @@ from gaitlib.transition_net.evaluate import evaluate_net
 from gaitlib.transition_net.fit import FitConfig, fit
 from gaitlib.transitions.records import TransitionData
 
-__all__ = ["CurvePoint", "learning_curve"]
+__all__ = ["TEST_FRACTION", "CurvePoint", "learning_curve"]
+
+
+TEST_FRACTION = 0.2
+"""Share of each pair's samples held out by default."""
 
 
 @dataclass(frozen=True)
@@ -48,7 +53,7 @@ class CurvePoint:
 
 
 def learning_curve(data: TransitionData, sizes: Sequence[int], *, config: FitConfig | None = None,
-                   test_fraction: float = 0.2, progress: Callable[[CurvePoint], None] | None = None
+                   test_fraction: float = TEST_FRACTION, progress: Callable[[CurvePoint], None] | None = None
                    ) -> list[CurvePoint]:
     """The curve of ``data`` at each of ``sizes`` collected samples per pair (module doc); ``config`` is each fit's
     (default: ``gaitlib fit``'s; its seed draws the held-out share and the order too)."""

@@ -11,18 +11,26 @@ Phases enter as points on the unit circle so that phi = 0.99 and phi = 0.01 are 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 
-from gaitlib.errors import TransitionDataError
+from gaitlib.errors import TransitionDataError, UnknownNameError
 from gaitlib.transitions.explicit import EXPLICIT_DIM
 from gaitlib.transitions.schema import TransitionBatch
 
-__all__ = ["INPUT_KINDS", "FeatureSpec", "batch_features", "build_features"]
+__all__ = ["INPUT_KINDS", "FeatureSpec", "batch_features", "build_features", "check_input_kinds"]
 
 INPUT_KINDS = ("latent", "phase", "explicit")
 """Accepted input kinds."""
+
+
+def check_input_kinds(kinds: Sequence[str]) -> None:
+    """Refuse, in one line, no input kind or one not in :data:`INPUT_KINDS`."""
+    for kind in kinds or ("",):
+        if kind not in INPUT_KINDS:
+            raise UnknownNameError("input", kind, list(INPUT_KINDS))
 _NEEDS = {"latent": "latent", "phase": "phase_source", "explicit": "explicit"}  # kind -> its specific input
 
 
