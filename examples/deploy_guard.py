@@ -59,14 +59,16 @@ class RobotGuard:
         k = np.round(np.arctan2(acceleration[1], acceleration[0]) / (np.pi / 2))
         return self.spec["sectors"][int(k) % 4]
 
-    def decide(self, gait, obs, phase, time_s, acceleration):
-        """(gait, destination phase) to switch to at once, or None to keep the gait."""
+    def decide(self, gait, obs, phase, time_s, acceleration, just_switched=False):
+        """(gait, destination phase) to switch to at once, or None to keep the gait. ``just_switched``: the last
+        switch your switching rule chose was less than the spec's horizon_s ago (only the floor catches then)."""
         table = self.spec["catch_into"]  # gait -> sector -> catch (where it lacks one, never caught), or None
         into = None if table is None else table.get(gait, {}).get(self.sector(acceleration))
         if time_s < self.spec["armed_from_s"] or (table is not None and into is None):
             return None  # still settling from the start (states the estimate never saw), or never caught
         stay, offers = self.read(gait, obs, phase, acceleration)
         dest = into if into is not None else max(offers, key=lambda g: offers[g][0])
-        if offers[dest][0] - stay > self.spec["margin"]:
+        beats = offers[dest][0] - stay > self.spec["margin"] and not just_switched
+        if beats or stay < self.spec["floor"]:
             return dest, offers[dest][1]
         return None

@@ -67,9 +67,23 @@ def test_guard_catches_a_failing_gait_and_returns(switching_library):
         assert again and again[0] >= c.back_step + hold
 
 
+def test_below_the_floor_the_guard_catches_even_just_after_a_chosen_switch(switching_library):
+    setup = load_switching(switching_library)
+    estimate = _forced(setup, {"trot": 1e-4, "stand": 1 - 1e-6})
+    estimate.floor = 0.5
+    catches, _, _ = _run(setup, estimate, 45, margin=0.0)
+    back = [c for c in catches if c.step == 0 and c.back_step is not None]
+    assert back
+    for c in back:  # the strategy's switch back to the trot: caught again at once, below the floor
+        again = [d.step for d in catches if d.world == c.world and d.step >= c.back_step]
+        assert again and again[0] == c.back_step  # without a floor: a horizon later (tested above)
+
+
 def test_guard_never_switches_where_staying_is_safe(switching_library):
     setup = load_switching(switching_library)
-    catches, gaits, _ = _run(setup, _forced(setup, {"trot": 1 - 1e-6, "stand": 1 - 1e-6}), 15, margin=0.05)
+    estimate = _forced(setup, {"trot": 1 - 1e-6, "stand": 1 - 1e-6})
+    estimate.floor = 0.5  # staying reads above it
+    catches, gaits, _ = _run(setup, estimate, 15, margin=0.05)
     assert catches == []
     assert (gaits == setup.gait_index("trot")).all()
 

@@ -51,6 +51,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     library = copy_library(Library(switching_library), tmp_path / "library")
     setup = load_switching(library.root)
     estimate = _estimate(setup, ("latent", "phase", "imu"), margin=0.0)
+    estimate.floor = 0.3  # the robot catches below it as the guard does
     estimate.info["armed_from_s"] = 2 / 30  # the first two control steps of an episode: no catch on either side
     table = {"stand": {"front": "trot", "back": "trot"}, "trot": dict.fromkeys(SECTORS, "stand")}
     estimate.info["catches"] = {"catch_into": table}  # a catch table by direction travels with it
@@ -63,7 +64,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     robot = module.RobotGuard(tmp_path / "guard")
-    assert robot.spec["catch_into"] == table and robot.spec["armed_from_s"] == 2 / 30
+    assert robot.spec["catch_into"] == table and robot.spec["armed_from_s"] == 2 / 30 and robot.spec["floor"] == 0.3
     guard = Guard(estimate, get_strategy("net-lookahead", setup.resources))
     sim = make_backend("mujoco", num_worlds=3)
     try:

@@ -12,7 +12,14 @@ from gaitlib.collection.survival import SurvivalRecording, read_survival_states,
 from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
-from gaitlib.strategies.survival import check_guard, fit_survival, load_survival, save_survival
+from gaitlib.strategies.survival import (
+    FALSE_ALARMS_PER_MIN,
+    FLOORS,
+    check_guard,
+    fit_survival,
+    load_survival,
+    save_survival,
+)
 from tests.cli_runner import gaitlib_quick
 from tests.conftest import copy_library
 
@@ -69,12 +76,14 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
     dt = read_survival_states(path)[0]["dt"]
     estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, horizons_s=(0.2, 0.4), epochs=2)
     report = estimate.info["report"]
-    assert estimate.horizon_s in (0.2, 0.4) and 0 <= estimate.margin < 1
+    assert estimate.horizon_s in (0.2, 0.4) and 0 <= estimate.margin < 1 and estimate.floor in FLOORS
+    assert report["floor"] == estimate.floor and report["floor_false_alarms_per_min"] <= FALSE_ALARMS_PER_MIN
     assert sum(row["states"] for row in report["reliability"]) > 0
     assert {c["horizon_s"] for c in estimate.info["choices"]} == {0.2, 0.4}
     save_survival(library, estimate, data=path)
     loaded = load_survival(library, setup.gaits)
-    assert (loaded.horizon_s, loaded.margin, loaded.platt) == (estimate.horizon_s, estimate.margin, estimate.platt)
+    assert (loaded.horizon_s, loaded.margin, loaded.floor, loaded.platt) == (
+        estimate.horizon_s, estimate.margin, estimate.floor, estimate.platt)
     shown = gaitlib_quick("library", "--library", str(library.root), "--json")
     assert shown.returncode == 0, shown.stderr
     assert json.loads(shown.stdout)["survival"]["state"] == "current"
@@ -87,8 +96,8 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
 
 def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
     path = recorded[0]
-    for bad in ({"horizon_s": 0.0}, {"horizon_s": 6.0}, {"margin": 1.0}, {"margin": -0.1}):
-        with pytest.raises(GaitlibError, match=r"horizon|margin"):
+    for bad in ({"horizon_s": 0.0}, {"horizon_s": 6.0}, {"margin": 1.0}, {"margin": -0.1}, {"floor": 1.0}):
+        with pytest.raises(GaitlibError, match=r"horizon|margin|floor"):
             check_guard(**bad)
     run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--margin", "1.5")
     assert run.returncode == 2 and run.stderr.count("\n") == 1 and "margin" in run.stderr

@@ -71,7 +71,7 @@ class TimedCatch(Guard):
                                    reading.latent, reading.armed)
         return reading
 
-    def fires(self, reading: GuardReading) -> torch.Tensor:
+    def fires(self, reading: GuardReading, *, quiet: torch.Tensor | None = None) -> torch.Tensor:
         best, _ = reading.best()
         return (self._env.episode_length_buf == self._start + self.delay) & torch.isfinite(best)
 

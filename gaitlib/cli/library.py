@@ -120,7 +120,7 @@ def _survival(lib, status) -> dict | None:
     except GaitlibError as stale:  # recorded with other policies, or damaged
         return {"state": "stale", "why": str(stale)}
     return {"state": "current", "horizon_s": estimate.horizon_s, "margin": estimate.margin,
-            "inputs": list(estimate.inputs)}
+            "floor": estimate.floor, "inputs": list(estimate.inputs)}
 
 
 def _num(value: float | None, digits: int) -> str:

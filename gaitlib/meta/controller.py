@@ -216,14 +216,14 @@ class MetaController:
                         catches)
 
     def _guard(self, events: list[SwitchEvent]) -> list[CatchEvent]:
-        """Catch every world whose best offer beats staying by more than the margin, at once (not one that still
-        holds the gait of its last catch, nor one within the horizon after a switch its strategy chose: the score of
-        that switch already counted the horizon after it); a catch into the queued gait is that request's switch (an
-        event of ``events``)."""
+        """Catch every world the guard fires on (:meth:`Guard.fires`), at once (not one that still holds the gait
+        of its last catch; one within the horizon after a switch its strategy chose only below the floor: the score
+        of that switch already counted the horizon after it); a catch into the queued gait is that request's switch
+        (an event of ``events``)."""
         env = self.env
         ids = torch.arange(env.num_envs, device=env.device)
         reading = self.guard.read(env, self.policies, ids, self.candidates)
-        fire = self.guard.fires(reading) & (self.hold <= 0) & (self.settle <= 0)  # the horizon after a switch
+        fire = self.guard.fires(reading, quiet=self.settle > 0) & (self.hold <= 0)  # the horizon after a switch
         self.stay = reading.stay
         if not fire.any():
             return []

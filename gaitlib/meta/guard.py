@@ -4,7 +4,9 @@ calibrated transition-net at each other gait's best destination phase,
 :meth:`~gaitlib.strategies.lookahead.LookaheadStrategy.offers`; where the estimate holds a catch table,
 :attr:`SurvivalEstimate.catch_into`, at the table's gait alone for the running gait and the direction the trunk's
 acceleration says it is pushed toward, and where the table has none it is never caught); where the best offer beats
-staying by more than the margin, the world switches there at once (a *catch*), without waiting for a better phase.
+staying by more than the margin, or where the estimate reads below its floor (:attr:`SurvivalEstimate.floor`), the
+world switches there at once (a *catch*), without waiting for a better phase. Within the horizon after a switch its
+strategy chose, only the floor catches: that switch's score already counted the horizon after it.
 The guard acts from the earliest moment of an episode its estimate saw a state of
 (:attr:`SurvivalEstimate.armed_from_s`, the recording's first; before it the robot settles from its start, states
 the estimate never learnt). After a catch the world holds the gait it was caught into for the estimate's horizon (it
@@ -109,10 +111,15 @@ class Guard:
         armed = env.episode_length_buf[ids] * env.dt >= self.estimate.armed_from_s - 1e-6
         return GuardReading(stay, offer.to(env.device), best_phase.to(env.device), latent, armed)
 
-    def fires(self, reading: GuardReading) -> torch.Tensor:
-        """(k,) bool: armed, and the best offer beats staying by more than the margin."""
+    def fires(self, reading: GuardReading, *, quiet: torch.Tensor | None = None) -> torch.Tensor:
+        """(k,) bool: armed, an offer to switch to, and the best offer beats staying by more than the margin (not
+        where ``quiet`` (k,) bool: within the horizon after a chosen switch) or staying reads below the floor."""
         best, _ = reading.best()
-        return (best - reading.stay > self.margin) & reading.armed
+        beats = best - reading.stay > self.margin
+        if quiet is not None:
+            beats &= ~quiet
+        low = reading.stay < self.estimate.floor
+        return (beats | low) & (best > float("-inf")) & reading.armed
 
 
 def catch_summary(catches: list[CatchEvent], gaits: tuple[str, ...], dt: float) -> dict:

@@ -10,7 +10,7 @@ Written into one folder:
   (standardization included);
 * ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
   to its logit;
-* ``guard.json``: the gaits, the policies' identities, the estimate's inputs, horizon, margin, the time from an
+* ``guard.json``: the gaits, the policies' identities, the estimate's inputs, horizon, margin, floor, the time from an
   episode's start before which it does not act (``armed_from_s``, s), the catch table (``catch_into``: running
   gait -> sector of ``sectors`` the trunk's acceleration points to -> the gait it is caught into; a gait or sector
   it lacks is never caught; null: the gait offered most) and Platt (a, b) per gait
@@ -42,7 +42,8 @@ __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
 
 DEPLOYABLE_INPUTS = (("latent", "phase"), ("latent", "phase", "imu"))
 """The survival inputs a robot-side loop computes from its own observations and IMU."""
-_FORMAT = {"format": "gaitlib.guard_export", "format_version": 3}  # 2: armed_from_s, catch_into; 3: imu, sectors
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 4}
+"""2: armed_from_s, catch_into; 3: imu, sectors; 4: floor."""
 
 
 class _Latent(torch.nn.Module):
@@ -100,6 +101,7 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "inputs": list(estimate.inputs),
         "horizon_s": estimate.horizon_s,
         "margin": estimate.margin,
+        "floor": estimate.floor,
         "armed_from_s": estimate.armed_from_s,
         "sectors": list(SECTORS),
         "catch_into": None if estimate.catch_into is None else {
@@ -110,7 +112,8 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "candidates": phase_grid().tolist(),
         "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
                 "catch_into table's gait for the running gait and the sector the trunk's acceleration points to, "
-                "where there is a table) beats the calibrated survival estimate by more than the margin, at once; "
-                "then hold it for horizon_s before the requested gait is switched to again; after a switch your "
-                "switching rule chose, do not catch for horizon_s either",
+                "where there is a table) beats the calibrated survival estimate by more than the margin, or where "
+                "the estimate reads below the floor, at once; then hold it for horizon_s before the requested gait "
+                "is switched to again; after a switch your switching rule chose, catch for horizon_s only below "
+                "the floor",
     }, checksum=True)

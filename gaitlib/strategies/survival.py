@@ -1,18 +1,21 @@
 """The survival estimate: the probability that a robot stays up over the next ``horizon_s`` if it keeps the gait it
-runs, from what the transition-net already sees (the running gait, its actor's latent psi_m, its phase) and,
-as candidate inputs, the gait's critic value (which reads the critic's privileged observation: an estimate using it
+runs, from what the transition-net already sees (the running gait, its actor's latent psi_m, its phase) and, as
+candidate inputs, the gait's critic value (which reads the critic's privileged observation: an estimate using it
 cannot run on a robot, :mod:`gaitlib.strategies.guard_export`) and the explicit state.
 
 It is fitted on recorded states (:mod:`gaitlib.collection.survival`: single shoves of 0-30 N s in every direction,
 switches before them), each labelled "no fall within ``horizon_s``" (a state whose episode ends sooner without a
 fall is left out: its label is unknown). Episodes are split three ways, never a state of one episode on two sides:
-the model trains on 60% of them, Platt scaling per gait (:func:`gaitlib.strategies.calibration.platt`, as the net
-is calibrated) is fitted on 20%, and the horizon and the guard's margin are chosen, and the estimate reported, on
-the last 20%. The guard (:mod:`gaitlib.meta.guard`) fires where the best switch the calibrated transition-net
-offers beats the estimate by more than the margin; the margin chosen is the smallest of :data:`MARGINS` whose false
-alarms on unshoved episodes stay within :data:`FALSE_ALARMS_PER_MIN`, and the horizon the one of those tried that
-then warns before the most falls. The estimate is written into the library's switching folder
-(``switching/survival.pt``) with the identities of the policies it was recorded with.
+the model trains on 60% of them, Platt scaling per gait (:func:`gaitlib.strategies.calibration.platt`, as the net is
+calibrated) is fitted on 20%, and the horizon and the guard's margin are chosen, and the estimate reported, on the
+last 20%. The guard (:mod:`gaitlib.meta.guard`) fires where the best switch the calibrated transition-net offers
+beats the estimate by more than the margin; the margin chosen is the smallest of :data:`MARGINS` whose false alarms
+on unshoved episodes stay within :data:`FALSE_ALARMS_PER_MIN`, and the horizon the one of those tried that then
+warns before the most falls. It also fires where the estimate reads below its floor, whatever the offers, even just
+after a switch its strategy chose: the floor chosen is the highest of :data:`FLOORS` whose firings on every unshoved
+state (of switched episodes too, from their switch on) stay within :data:`FALSE_ALARMS_PER_MIN`. The estimate is
+written into the library's switching folder (``switching/survival.pt``) with the identities of the policies it was
+recorded with.
 """
 
 from __future__ import annotations
@@ -34,9 +37,9 @@ from gaitlib.strategies.calibration import platt
 from gaitlib.values import GUARD_HORIZON_S
 
 __all__ = [
-    "FALSE_ALARMS_PER_MIN", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate", "SurvivalNet",
-    "check_guard",
-    "fit_survival", "load_survival", "save_catch_table", "save_survival", "shove_sector", "survival_features",
+    "FALSE_ALARMS_PER_MIN", "FLOORS", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate",
+    "SurvivalNet", "check_guard", "fit_survival", "load_survival", "save_catch_table", "save_survival",
+    "shove_sector", "survival_features",
 ]
 
 SURVIVAL_FILE = Library.SURVIVAL
@@ -49,6 +52,8 @@ HORIZONS_S = (0.5, 1.0, 1.5)
 """Horizons tried by default, s."""
 MARGINS = tuple(round(0.05 * k, 2) for k in range(20))
 """Margins tried, in order (0 to 0.95): the guard switches where an offer beats staying by more than this."""
+FLOORS = tuple(round(0.05 * k, 2) for k in range(11))
+"""Floors tried (0 to 0.5): the guard catches where the estimate reads below the floor (0: never)."""
 FALSE_ALARMS_PER_MIN = 0.1
 """Most guard firings per minute of unshoved running the chosen margin may give on the selection split (the goal:
 at most one false catch per 10 minutes)."""
@@ -57,12 +62,14 @@ _SPLIT = (0.6, 0.2)
 """Shares of episodes the model trains on and the calibration is fitted on; the rest select and report."""
 
 
-def check_guard(*, horizon_s: float | None = None, margin: float | None = None) -> None:
-    """Refuse, in one line, a horizon outside (0, 5] s or a margin outside [0, 1)."""
+def check_guard(*, horizon_s: float | None = None, margin: float | None = None, floor: float | None = None) -> None:
+    """Refuse, in one line, a horizon outside (0, 5] s, or a margin or floor outside [0, 1)."""
     if horizon_s is not None and not 0 < horizon_s <= GUARD_HORIZON_S.high:
         raise GaitlibError(f"the guard's horizon ({horizon_s:g} s) must lie in {GUARD_HORIZON_S.describe()}")
     if margin is not None and not 0 <= margin < 1:
         raise GaitlibError(f"the guard's margin ({margin:g}) must lie in [0, 1)")
+    if floor is not None and not 0 <= floor < 1:
+        raise GaitlibError(f"the guard's floor ({floor:g}) must lie in [0, 1)")
 
 
 def survival_features(inputs: tuple[str, ...], gaits: int, *, gait: torch.Tensor, latent: torch.Tensor,
@@ -124,6 +131,9 @@ class SurvivalEstimate:
     net: SurvivalNet
     info: dict = field(default_factory=dict)
     """How it was fitted and chosen, its reliability table, lead times and false alarms (JSON-ready)."""
+    floor: float = 0.0
+    """Below this estimate the guard catches whatever the margin, even just after a switch its strategy chose (0:
+    never)."""
 
     @property
     def armed_from_s(self) -> float:
@@ -232,6 +242,21 @@ def _judge(data: dict, rows: np.ndarray, p: np.ndarray, margin: float, dt: float
     }
 
 
+def _floor(data: dict, rows: np.ndarray, p: np.ndarray, dt: float) -> tuple[float, float]:
+    """(floor, its firings per unshoved minute): the highest of :data:`FLOORS` whose onsets of ``p`` below it on
+    the unshoved states of ``rows`` (in episode, time order) stay within :data:`FALSE_ALARMS_PER_MIN`."""
+    calm = data["impulse_ns"][rows] == 0
+    episode, minutes = data["episode"][rows][calm], calm.sum() * dt / 60
+    chosen = (0.0, 0.0)
+    for floor in FLOORS[1:]:
+        low = p[calm] < floor
+        rate = float((low & ~np.concatenate([[False], low[:-1] & (episode[1:] == episode[:-1])])).sum() / minutes)
+        if rate > FALSE_ALARMS_PER_MIN:
+            break
+        chosen = (floor, rate)
+    return chosen
+
+
 def _reliability(p: np.ndarray, up: np.ndarray, bins: int = 10) -> list[dict]:
     edges = np.linspace(0, 1, bins + 1)
     rows = []
@@ -245,13 +270,14 @@ def _reliability(p: np.ndarray, up: np.ndarray, bins: int = 10) -> list[dict]:
 
 def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identities: dict[str, str], dt: float,
                  inputs: tuple[str, ...] = ("latent", "phase"), horizons_s: tuple[float, ...] = HORIZONS_S,
-                 margin: float | None = None, epochs: int = 20, seed: int = 0) -> SurvivalEstimate:
+                 margin: float | None = None, floor: float | None = None, epochs: int = 20,
+                 seed: int = 0) -> SurvivalEstimate:
     """Fit, calibrate and choose (module doc) on recorded states ``data`` (the columns of
-    :mod:`gaitlib.collection.survival`, rows in episode and time order, control period ``dt`` s). ``margin``: use
-    this one instead of choosing it. Bad input is refused in one line before any fit."""
+    :mod:`gaitlib.collection.survival`, rows in episode and time order, control period ``dt`` s). ``margin``,
+    ``floor``: use these instead of choosing them. Bad input is refused in one line before any fit."""
     for h in horizons_s:
         check_guard(horizon_s=h)
-    check_guard(margin=margin)
+    check_guard(margin=margin, floor=floor)
     if unknown := [i for i in inputs if i not in INPUTS]:
         raise GaitlibError(f"unknown survival input(s) {', '.join(unknown)} (known: {', '.join(INPUTS)})")
     if absent := [i for i in inputs if i not in data]:
@@ -282,19 +308,23 @@ def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identit
         tried = [_judge(data, everything, p_all, m, dt) for m in ((margin,) if margin is not None else MARGINS)]
         quiet = [t for t in tried if (t["false_alarms_per_min"] or 0.0) <= FALSE_ALARMS_PER_MIN]
         chosen = quiet[0] if quiet else tried[-1]
+        low, low_rate = _floor(data, everything, p_all, dt) if floor is None else (floor, None)
+        chosen = chosen | {"floor": low, "floor_false_alarms_per_min": low_rate}
         p_sel = p_all[np.isin(everything, select)]
         chosen = chosen | {"horizon_s": horizon, "reliability": _reliability(p_sel, up[select]),
                            "log_loss": float(-np.mean(np.log(np.where(up[select], p_sel, 1 - p_sel).clip(1e-6))))}
         choices.append(chosen)
         if best is None or (chosen["warned"], -horizon) > (best[1]["warned"], -best[0].horizon_s):
-            estimate.margin = chosen["margin"]
+            estimate.margin, estimate.floor = chosen["margin"], low
             best = (estimate, chosen)
     estimate, report = best
     estimate.info = {
         "report": report, "choices": choices,
         "rule": f"horizon and margin chosen on the selection split (20% of episodes): the smallest margin of "
                 f"{MARGINS[0]}-{MARGINS[-1]} with at most {FALSE_ALARMS_PER_MIN} firings per unshoved minute, then "
-                "the horizon warning before the most falls; Platt scaling per gait on the calibration split (20%)",
+                "the horizon warning before the most falls; the highest floor of "
+                f"{FLOORS[0]}-{FLOORS[-1]} with at most as many firings on every unshoved state; Platt scaling per "
+                "gait on the calibration split (20%)",
         "states": len(data["gait"]), "episodes": len(np.unique(data["episode"])), "epochs": epochs,
         "seed": seed, "dt": dt,
         "armed_from_s": round(float(data["time_s"].min()), 6),
@@ -307,7 +337,8 @@ def save_survival(library: Library, estimate: SurvivalEstimate, *, data: Path) -
     path = library.switching_dir / SURVIVAL_FILE
     metadata = _FORMAT | {
         "gaits": list(estimate.gaits), "library_identities": estimate.identities, "inputs": list(estimate.inputs),
-        "horizon_s": estimate.horizon_s, "margin": estimate.margin, "dim": int(estimate.net.mean.numel()),
+        "horizon_s": estimate.horizon_s, "margin": estimate.margin, "floor": estimate.floor,
+        "dim": int(estimate.net.mean.numel()),
         "platt": {estimate.gaits[k]: list(ab) for k, ab in estimate.platt.items()}, "info": estimate.info,
         "data": {"path": str(data), "sha256": file_sha256(data)},
     }
@@ -344,8 +375,9 @@ def load_survival(library: Library, gaits: tuple[str, ...]) -> SurvivalEstimate:
         net.load_state_dict(saved["state_dict"])
         ab = {names.index(name): (float(v[0]), float(v[1])) for name, v in meta["platt"].items()}
         estimate = SurvivalEstimate(names, dict(meta["library_identities"]), tuple(meta["inputs"]),
-                                    float(meta["horizon_s"]), float(meta["margin"]), ab, net.eval(), meta["info"])
-        check_guard(horizon_s=estimate.horizon_s, margin=estimate.margin)
+                                    float(meta["horizon_s"]), float(meta["margin"]), ab, net.eval(), meta["info"],
+                                    float(meta.get("floor", 0.0)))  # none before floors existed
+        check_guard(horizon_s=estimate.horizon_s, margin=estimate.margin, floor=estimate.floor)
         if not all(math.isfinite(v) for pair in ab.values() for v in pair):
             raise ValueError("a gait's Platt parameters are not finite")
     except GaitlibError as error:
