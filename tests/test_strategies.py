@@ -270,6 +270,23 @@ def test_platt_recovers_the_map_the_labels_were_drawn_from() -> None:
     assert all(math.isfinite(v) for v in platt(few, np.ones(3, dtype=bool)))
 
 
+def test_platt_is_the_likelihoods_maximum_where_a_plain_newton_step_overshoots() -> None:
+    """A few successes at a score of 1e-6 (the lowest the calibration reads), beside ordinary ones: Newton's step
+    from (1, 0) overshoots to parameters of 1e9 and more without a line search."""
+    z = np.r_[np.full(5, math.log(1e-6 / (1 - 1e-6))), np.full(1100, 2.0), np.linspace(-5, 5, 50)]
+    success = np.r_[np.ones(1005), np.zeros(100), np.linspace(-5, 5, 50) > 0].astype(bool)
+    a, b = platt(1 / (1 + np.exp(-z)), success)
+    positives, negatives = success.sum(), (~success).sum()
+    target = np.where(success, (positives + 1) / (positives + 2), 1 / (negatives + 2))
+
+    def loss(pa: float, pb: float) -> float:
+        s = pa * z + pb
+        return float(np.sum(np.logaddexp(0.0, s) - target * s))
+
+    assert abs(a) < 10 and abs(b) < 10
+    assert all(loss(a, b) <= loss(a + da, b + db) for da in (-1e-3, 0, 1e-3) for db in (-1e-3, 0, 1e-3))
+
+
 def test_calibration_undoes_the_balanced_prior() -> None:
     """A score that says nothing (0.5 everywhere) on a pair where 90% of switches succeed, calibrated on held-out
     rows of which the training took as many failures as successes, is worth about 0.9."""

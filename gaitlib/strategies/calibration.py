@@ -40,25 +40,40 @@ def _logit(score: np.ndarray) -> np.ndarray:
 
 
 def platt(score: np.ndarray, success: np.ndarray, weight: np.ndarray | None = None) -> tuple[float, float]:
-    """Platt's (a, b) for ``p = sigmoid(a * logit(score) + b)``: weighted maximum likelihood by Newton's method,
-    with targets (N+ + 1) / (N+ + 2) for successes and 1 / (N- + 2) for failures (N: weighted counts)."""
+    """Platt's (a, b) for ``p = sigmoid(a * logit(score) + b)``: weighted maximum likelihood with targets
+    (N+ + 1) / (N+ + 2) for successes and 1 / (N- + 2) for failures (N: weighted counts), by Newton's method with a
+    backtracking line search (Lin, Lin and Weng, "A note on Platt's probabilistic outputs for support vector
+    machines", Machine Learning 68, 2007): a plain Newton step overshoots where the logistic's curvature vanishes."""
     z = _logit(score)
     y = np.asarray(success, dtype=bool)
     w = np.ones_like(z) if weight is None else np.asarray(weight, dtype=np.float64)
     positives, negatives = w[y].sum(), w[~y].sum()
     target = np.where(y, (positives + 1) / (positives + 2), 1 / (negatives + 2))
-    a, b = 1.0, 0.0
+
+    def loss(ab: np.ndarray) -> float:  # the weighted negative log-likelihood
+        s = ab[0] * z + ab[1]
+        return float(np.sum(w * (np.logaddexp(0.0, s) - target * s)))
+
+    ab, current = np.array([1.0, 0.0]), loss(np.array([1.0, 0.0]))
     for _ in range(100):
-        p = 0.5 * (1 + np.tanh(0.5 * (a * z + b)))  # the logistic function, without exp's overflow
+        p = 0.5 * (1 + np.tanh(0.5 * (ab[0] * z + ab[1])))  # the logistic function, without exp's overflow
         gradient = np.array([np.sum(w * (p - target) * z), np.sum(w * (p - target))])
-        curvature = w * np.maximum(p * (1 - p), 1e-12)
+        curvature = w * p * (1 - p)
         cross = np.sum(curvature * z)
-        hessian = np.array([[np.sum(curvature * z * z), cross], [cross, curvature.sum()]])
-        step = np.linalg.solve(hessian + 1e-9 * np.eye(2), gradient)
-        a, b = a - step[0], b - step[1]
-        if np.abs(step).max() < 1e-10:
+        hessian = np.array([[np.sum(curvature * z * z), cross], [cross, curvature.sum()]]) + 1e-12 * np.eye(2)
+        step = -np.linalg.solve(hessian, gradient)
+        size = 1.0
+        while size >= 1e-10:  # halve the step until the loss falls enough (Armijo's rule)
+            trial = loss(ab + size * step)
+            if trial < current + 1e-4 * size * float(gradient @ step):
+                break
+            size /= 2
+        else:
+            break  # no step lowers the loss: at its minimum to machine precision
+        ab, current = ab + size * step, trial
+        if np.abs(size * step).max() < 1e-10:
             break
-    return float(a), float(b)
+    return float(ab[0]), float(ab[1])
 
 
 @dataclass(frozen=True)
