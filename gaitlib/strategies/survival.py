@@ -12,10 +12,10 @@ last 20%. The guard (:mod:`gaitlib.meta.guard`) fires where the best switch the 
 beats the estimate by more than the margin; the margin chosen is the smallest of :data:`MARGINS` whose false alarms
 on unshoved episodes stay within :data:`FALSE_ALARMS_PER_MIN`, and the horizon the one of those tried that then
 warns before the most falls. It also fires where the estimate reads below its floor, whatever the offers, even just
-after a switch its strategy chose: the floor chosen is the highest of :data:`FLOORS` whose firings on every unshoved
-state (of switched episodes too, from their switch on) stay within :data:`FALSE_ALARMS_PER_MIN`. The estimate is
-written into the library's switching folder (``switching/survival.pt``) with the identities of the policies it was
-recorded with.
+after a switch its strategy chose: the floor chosen is the highest of :data:`FLOORS` whose false alarms (firings on
+unshoved episodes that stay up, switched ones too from their switch on) stay within :data:`FALSE_ALARMS_PER_MIN`.
+The estimate is written into the library's switching folder (``switching/survival.pt``) with the identities of the
+policies it was recorded with.
 """
 
 from __future__ import annotations
@@ -243,9 +243,10 @@ def _judge(data: dict, rows: np.ndarray, p: np.ndarray, margin: float, dt: float
 
 
 def _floor(data: dict, rows: np.ndarray, p: np.ndarray, dt: float) -> tuple[float, float]:
-    """(floor, its firings per unshoved minute): the highest of :data:`FLOORS` whose onsets of ``p`` below it on
-    the unshoved states of ``rows`` (in episode, time order) stay within :data:`FALSE_ALARMS_PER_MIN`."""
-    calm = data["impulse_ns"][rows] == 0
+    """(floor, its false alarms per unshoved minute): the highest of :data:`FLOORS` whose onsets of ``p`` below it
+    on the states of ``rows`` (in episode, time order) of unshoved episodes that stay up (a switch may fell one:
+    a firing before that fall is no false alarm) stay within :data:`FALSE_ALARMS_PER_MIN`."""
+    calm = (data["impulse_ns"][rows] == 0) & ~np.isfinite(data["fall_s"][rows])
     episode, minutes = data["episode"][rows][calm], calm.sum() * dt / 60
     chosen = (0.0, 0.0)
     for floor in FLOORS[1:]:
@@ -323,7 +324,7 @@ def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identit
         "rule": f"horizon and margin chosen on the selection split (20% of episodes): the smallest margin of "
                 f"{MARGINS[0]}-{MARGINS[-1]} with at most {FALSE_ALARMS_PER_MIN} firings per unshoved minute, then "
                 "the horizon warning before the most falls; the highest floor of "
-                f"{FLOORS[0]}-{FLOORS[-1]} with at most as many firings on every unshoved state; Platt scaling per "
+                f"{FLOORS[0]}-{FLOORS[-1]} with at most as many on unshoved episodes that stay up; Platt scaling per "
                 "gait on the calibration split (20%)",
         "states": len(data["gait"]), "episodes": len(np.unique(data["episode"])), "epochs": epochs,
         "seed": seed, "dt": dt,
