@@ -74,7 +74,8 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
     library = copy_library(Library(switching_library), tmp_path / "library")
     identities = library.identities(setup.gaits)
     dt = read_survival_states(path)[0]["dt"]
-    estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, horizons_s=(0.2, 0.4), epochs=2)
+    estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, horizons_s=(0.2, 0.4), epochs=2,
+                            floor=None)  # the floor chosen too (by default none: 0)
     report = estimate.info["report"]
     assert estimate.horizon_s in (0.2, 0.4) and 0 <= estimate.margin < 1 and estimate.floor in FLOORS
     assert report["floor"] == estimate.floor and report["floor_false_alarms_per_min"] <= FALSE_ALARMS_PER_MIN
@@ -108,6 +109,11 @@ def test_bad_horizon_or_margin_refused_before_work(recorded, tmp_path):
         run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--horizons",
                             horizons)
         assert run.returncode == 2 and run.stderr == f"gaitlib: error: {says}\n" and run.stdout == ""
+    for floor, says in (("1", "the guard's floor (1) must lie in [0, 1)"),
+                        ("low", "--floor must be a number in [0, 1) or auto, got 'low'")):
+        run = gaitlib_quick("survival", "fit", str(path), "--library", str(tmp_path / "nothing"), "--floor", floor)
+        assert run.returncode == 2 and run.stderr == f"gaitlib: error: {says}\n" and run.stdout == ""
+    assert not (tmp_path / "nothing").exists()
     assert not (tmp_path / "nothing").exists()
 
 

@@ -11,7 +11,7 @@ import typer
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.defaults import Falls
-from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, parse_values
+from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, OptionError, parse_values
 
 __all__ = ["app", "guarded_curve"]
 
@@ -58,8 +58,9 @@ def fit_command(
     horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]: "
                                  "START:STOP:STEP or a list."),
     margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
-    floor: float | None = typer.Option(None, "--floor", help="Use this floor instead of choosing it, in [0, 1) (0: "
-                                       "the guard never catches on the estimate alone)."),
+    floor: str = typer.Option("0", "--floor", help="Below this estimate the guard catches whatever the margin, in "
+                              "[0, 1) (0: never), or auto: the highest of 0-0.5 with at most 0.1 false alarms per "
+                              "unshoved minute on the selection split (docs/switching.md, \"The guard\")."),
     inputs: str = typer.Option("latent,phase,imu", "--inputs", help="Inputs besides the gait: latent, phase, imu "
                                "(the trunk's acceleration, as an IMU reads it), value (the critic's, privileged: not "
                                "exportable to a robot), explicit."),
@@ -80,14 +81,18 @@ def fit_command(
     from gaitlib.strategies.survival import check_guard, fit_survival, save_survival
 
     chosen = parse_values(horizons, option="--horizons", bounds=GUARD_HORIZON_S, example="0.5:1.5:0.5")
-    check_guard(margin=margin, floor=floor)
+    try:
+        chosen_floor = None if floor == "auto" else float(floor)
+    except ValueError:
+        raise OptionError(f"--floor must be a number in [0, 1) or auto, got '{floor}'") from None
+    check_guard(margin=margin, floor=chosen_floor)
     target, copy_from = writing_target(library)
     check_writable(target, replace=replace, command="gaitlib survival fit", what="the survival estimate")
     header, states = read_survival_states(data)
     Library(copy_from or target).check_identities(header["identities"], what=f"survival states {data}")
     estimate = fit_survival(states, gaits=tuple(header["gaits"]), identities=header["identities"], dt=header["dt"],
                             inputs=tuple(i.strip() for i in inputs.split(",")), horizons_s=chosen, margin=margin,
-                            floor=floor, epochs=epochs, seed=seed)
+                            floor=chosen_floor, epochs=epochs, seed=seed)
     if copy_from is not None:
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib survival fit"):
@@ -97,8 +102,8 @@ def fit_command(
         print(json_text({"path": str(path), "horizon_s": estimate.horizon_s, "margin": estimate.margin,
                          "floor": estimate.floor} | estimate.info))
         return
-    print(f"{path}: horizon {estimate.horizon_s:g} s, margin {estimate.margin:g}, floor {estimate.floor:g} (chosen "
-          "on the selection split)")
+    print(f"{path}: horizon {estimate.horizon_s:g} s, margin {estimate.margin:g} (chosen on the selection split), "
+          f"floor {estimate.floor:g}" + (" (chosen there too)" if chosen_floor is None else ""))
     print("reliability (selection split): predicted -> observed (states)")
     for row in report["reliability"]:
         print(f"  {row['bin'][0]:.1f}-{row['bin'][1]:.1f}: {row['predicted']:.3f} -> {row['observed']:.3f} "

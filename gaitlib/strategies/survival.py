@@ -11,8 +11,8 @@ calibrated) is fitted on 20%, and the horizon and the guard's margin are chosen,
 last 20%. The guard (:mod:`gaitlib.meta.guard`) fires where the best switch the calibrated transition-net offers
 beats the estimate by more than the margin; the margin chosen is the smallest of :data:`MARGINS` whose false alarms
 on unshoved episodes stay within :data:`FALSE_ALARMS_PER_MIN`, and the horizon the one of those tried that then
-warns before the most falls. It also fires where the estimate reads below its floor, whatever the offers, even just
-after a switch its strategy chose: the floor chosen is the highest of :data:`FLOORS` whose false alarms (firings on
+warns before the most falls. Given a floor, it also fires where the estimate reads below it, whatever the offers, even
+just after a switch its strategy chose; a floor chosen is the highest of :data:`FLOORS` whose false alarms (firings on
 unshoved episodes that stay up, switched ones too from their switch on) stay within :data:`FALSE_ALARMS_PER_MIN`.
 The estimate is written into the library's switching folder (``switching/survival.pt``) with the identities of the
 policies it was recorded with.
@@ -271,11 +271,13 @@ def _reliability(p: np.ndarray, up: np.ndarray, bins: int = 10) -> list[dict]:
 
 def fit_survival(data: dict[str, np.ndarray], *, gaits: tuple[str, ...], identities: dict[str, str], dt: float,
                  inputs: tuple[str, ...] = ("latent", "phase"), horizons_s: tuple[float, ...] = HORIZONS_S,
-                 margin: float | None = None, floor: float | None = None, epochs: int = 20,
+                 margin: float | None = None, floor: float | None = 0.0, epochs: int = 20,
                  seed: int = 0) -> SurvivalEstimate:
     """Fit, calibrate and choose (module doc) on recorded states ``data`` (the columns of
-    :mod:`gaitlib.collection.survival`, rows in episode and time order, control period ``dt`` s). ``margin``,
-    ``floor``: use these instead of choosing them. Bad input is refused in one line before any fit."""
+    :mod:`gaitlib.collection.survival`, rows in episode and time order, control period ``dt`` s). ``margin``: use
+    this one instead of choosing it. ``floor``: this one (by default 0: the guard never catches on the estimate
+    alone; a chosen floor measured worse on the pace), or ``None``: choose it. Bad input is refused in one line
+    before any fit."""
     for h in horizons_s:
         check_guard(horizon_s=h)
     check_guard(margin=margin, floor=floor)
