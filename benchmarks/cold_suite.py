@@ -1,8 +1,8 @@
-"""The test suite on a machine whose Warp kernel cache is empty (a fresh CI machine): its wall-clock time with the
-Newton tests on one worker (``--dist loadgroup``, the suite's setting), against the same suite with each file on
-any worker (``--dist loadfile``, the reference), each run with a cache folder of its own, empty at its start.
+"""The test suite on a machine whose Warp kernel cache is empty (a fresh CI machine): its wall-clock time under each
+pytest-xdist ``--dist`` mode given, the first the measured one (the suite's: ``loadfile``, each file on one worker),
+the second the reference, each run with a cache folder of its own, empty at its start.
 
-    python benchmarks/cold_suite.py [--runs loadgroup,loadfile] [--out cold_suite.json]
+    python benchmarks/cold_suite.py [--runs loadfile,loadgroup] [--out cold_suite.json]
 
 Run it from a clean clone with its venv installed (`.ci/run`'s environment), nothing else on the cores. Prints
 one JSON line per run, then the ratio of the suite's time to the reference's.
@@ -36,7 +36,7 @@ def cold_run(dist: str) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", default="loadgroup,loadfile", help="pytest-xdist --dist modes, the first measured")
+    parser.add_argument("--runs", default="loadfile,loadgroup", help="pytest-xdist --dist modes, the first measured")
     parser.add_argument("--out", type=Path, default=None, help="also write the runs here as JSON")
     args = parser.parse_args()
     runs = [cold_run(dist) for dist in args.runs.split(",")]

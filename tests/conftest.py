@@ -25,37 +25,28 @@ BACKENDS = [
 ]
 
 LONGEST_FILES = (
-    "test_cluster.py", "test_user_library.py", "test_sim_backends.py", "test_cli_switching.py", "test_cli_train.py",
-    "test_gpu_check.py", "test_cli_transitions.py", "test_distributed.py", "test_full_disk.py",
-    "test_guard.py", "test_byte_flips.py", "test_packaging.py",
+    "test_cluster.py", "test_user_library.py", "test_full_disk.py", "test_gpu_check.py", "test_cli_transitions.py",
+    "test_cli_train.py", "test_library.py", "test_distributed.py", "test_writers.py", "test_byte_flips.py",
+    "test_transition_crash_safety.py", "test_cli_switching.py",
 )
-"""The test files that take longest (``pytest --durations``), run first: pytest-xdist hands whole files to its
-workers in collection order, so a long file collected last keeps one core busy while the other idles."""
+"""The test files that take longest (``pytest --durations=0``), run first: pytest-xdist hands whole files to its
+workers (``--dist loadfile``) in collection order, so a long file collected last keeps one core busy while the other
+idles."""
 
 
-NEWTON_GROUP = "newton"
-"""The pytest-xdist group of every test that runs the newton backend (``--dist loadgroup``): one worker runs them
-all, one after the other, so that Warp compiles each kernel once into its cache (about a minute and a quarter on a
-2-core machine with an empty cache) while the other workers run the rest, instead of every worker compiling the same
-kernels at the same time."""
-
-
-def _group(item: pytest.Item) -> str:
-    """An item's xdist group: :data:`NEWTON_GROUP` for the tests that run newton, else its file (``loadfile``)."""
+def _runs_newton(item: pytest.Item) -> bool:
     callspec = getattr(item, "callspec", None)
-    newton = item.get_closest_marker("newton") is not None or (
+    return item.get_closest_marker("newton") is not None or item.path.name == "test_gpu_check.py" or (
         callspec is not None and callspec.params.get("backend_name") == "newton"
     )
-    return NEWTON_GROUP if newton or item.path.name == "test_gpu_check.py" else item.path.name
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The newton group first, then the longest files (:data:`LONGEST_FILES`), the rest in their usual order; each
-    item marked with its xdist group (:func:`_group`)."""
+    """The files with tests that run the newton backend first (Warp compiles its kernels on first use: about a
+    minute and a quarter on a 2-core machine with an empty cache), then the longest files (:data:`LONGEST_FILES`),
+    the rest in their usual order."""
     rank = {name: i + 1 for i, name in enumerate(LONGEST_FILES)}
-    for item in items:
-        item.add_marker(pytest.mark.xdist_group(_group(item)))
-    items.sort(key=lambda item: 0 if _group(item) == NEWTON_GROUP else rank.get(item.path.name, len(rank) + 1))
+    items.sort(key=lambda item: 0 if _runs_newton(item) else rank.get(item.path.name, len(rank) + 1))
 
 
 @pytest.fixture(params=BACKENDS)
