@@ -1,5 +1,5 @@
-"""``gaitlib eval`` on a gait that sidesteps or turns: its lateral speed, yaw rate and heading against the
-reference's, on the real simulator; a gait that goes straight records none of them."""
+"""``gaitlib eval`` on a gait that sidesteps, turns or goes backward: its lateral speed, yaw rate and heading
+against the reference's, on the real simulator; a gait that goes straight ahead records none of them."""
 
 from __future__ import annotations
 
@@ -44,6 +44,13 @@ def test_a_sidestep_is_measured_sideways() -> None:
     assert s.lateral_speed_error == pytest.approx(abs(s.lateral_speed - s.reference_lateral_speed) / 0.3, rel=0.06)
 
 
-def test_a_gait_that_goes_straight_records_no_steering_figures() -> None:
+def test_a_backward_trot_is_measured_for_the_drift_its_bar_allows() -> None:
+    s = _evaluate(clip_from_description(get_gait("trot_back")), seconds=0.3).steering
+    assert s is not None and abs(s.reference_lateral_speed) < 1e-3 and abs(s.reference_yaw_rate) < 1e-3
+    assert s.lateral_speed_error == pytest.approx(abs(s.lateral_speed))
+    assert s.yaw_rate_error == pytest.approx(abs(s.yaw_rate))
+
+
+def test_a_gait_that_goes_straight_ahead_records_no_steering_figures() -> None:
     result = _evaluate(Library(SHIPPED).entry("trot").clip, seconds=0.3)
     assert result.steering is None and "steering" not in result.as_dict()

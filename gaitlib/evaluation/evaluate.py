@@ -54,8 +54,10 @@ class SteeringFigures:
 
 
 def steers(clip: ReferenceClip) -> bool:
-    """Whether ``clip`` sidesteps or turns: a cycle yaw, or a sideways displacement per cycle (over 1 micrometre)."""
-    return clip.cycle_yaw != 0.0 or abs(float(clip.cycle_displacement[1])) > _ZERO
+    """Whether ``clip`` is a steering skill, whose quality bar reads the steering figures: it turns, sidesteps or goes
+    backward (a cycle yaw, or a sideways or backward displacement per cycle over 1 micrometre)."""
+    shift = clip.cycle_displacement
+    return clip.cycle_yaw != 0.0 or abs(float(shift[1])) > _ZERO or float(shift[0]) < -_ZERO
 
 
 @dataclass(frozen=True, kw_only=True)
