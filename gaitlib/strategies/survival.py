@@ -218,6 +218,12 @@ def _firing(offer: np.ndarray, p: np.ndarray, margin: float) -> np.ndarray:
     return np.nan_to_num(offer, nan=-np.inf).max(axis=1) - p > margin
 
 
+def _onsets(fire: np.ndarray, episode: np.ndarray) -> np.ndarray:
+    """(rows,) bool: where ``fire`` turns on, rows in episode and time order (a firing the row before, in the same
+    episode, is the same alarm)."""
+    return fire & ~np.concatenate([[False], fire[:-1] & (episode[1:] == episode[:-1])])
+
+
 def _judge(data: dict, rows: np.ndarray, p: np.ndarray, margin: float, dt: float) -> dict:
     """The guard's warnings on ``rows`` (in episode, time order) at ``margin``: falls warned before and lead times,
     firings per minute of unshoved running without a switch."""
@@ -230,7 +236,7 @@ def _judge(data: dict, rows: np.ndarray, p: np.ndarray, margin: float, dt: float
         warned = here & fire
         leads.append(float(fall_s[warned][0] - time_s[warned][0]) if warned.any() else 0.0)
     calm = (data["impulse_ns"][rows] == 0) & ~data["switched"][rows]
-    onsets = fire & calm & ~np.concatenate([[False], fire[:-1] & (episode[1:] == episode[:-1])])
+    onsets = _onsets(fire, episode) & calm
     minutes = calm.sum() * dt / 60
     leads_a = np.asarray(leads)
     return {
@@ -251,7 +257,7 @@ def _floor(data: dict, rows: np.ndarray, p: np.ndarray, dt: float) -> tuple[floa
     chosen = (0.0, 0.0)
     for floor in FLOORS[1:]:
         low = p[calm] < floor
-        rate = float((low & ~np.concatenate([[False], low[:-1] & (episode[1:] == episode[:-1])])).sum() / minutes)
+        rate = float(_onsets(low, episode).sum() / minutes)
         if rate > FALSE_ALARMS_PER_MIN:
             break
         chosen = (floor, rate)
