@@ -131,7 +131,6 @@ def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
 
 
-
 def test_the_staged_steering_skills_are_whole_entries_awaiting_their_switching_models() -> None:
     """library-steer holds the six steering skills, each a whole entry (policy, identity, evaluation); its one problem
     is the switching models it does not have yet, with the commands that make them."""
@@ -140,6 +139,7 @@ def test_the_staged_steering_skills_are_whole_entries_awaiting_their_switching_m
                                        "turn_left"]
     assert all(g["problem"] is None and g["eval_episodes"] == 256 for g in status["gaits"].values())
     assert [p["text"] for p in status["problems"]] == ["no switching models yet (transition-net, TMT)"]
+
 
 def readme_recipe(readme: Path) -> Recipe:
     """The recipe a library's README trains every gait with: its ``R="..."`` line of ``gaitlib train``
