@@ -4,12 +4,13 @@
     python -m benchmarks.results --check    # exit 1 naming the first table that differs from its evidence
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
-``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation) and
-``docs/switching_results.md`` (the switches in detail). Everything between the two markers is made here from
-the evidence and nothing else, so a figure edited by hand, or a stored result replaced without rewriting the page,
-makes ``--check`` fail (tests/test_results_doc.py runs it). The tables themselves are made in
-:mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`, :mod:`~benchmarks.results.switches` and
-:mod:`~benchmarks.results.sweep`; how evidence is read and written is :mod:`benchmarks.results.evidence`.
+``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
+``docs/switching_results.md`` (the switches in detail) and ``docs/transitions.md`` (the net's learning curve).
+Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
+stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
+tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
+:mod:`~benchmarks.results.switches` and :mod:`~benchmarks.results.sweep`; how evidence is read and written is
+:mod:`benchmarks.results.evidence`.
 """
 
 from __future__ import annotations
@@ -24,9 +25,11 @@ from pathlib import Path
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.headline import (
     ACCURACY,
+    CURVE,
     ROBUST_GOAL,
     SWITCH_START_ACCURACY,
     accuracy_table,
+    curve_table,
     pairs_table,
     quality_bar,
     routes_table,
@@ -45,6 +48,7 @@ PAGES = {
     "results": ("quality-bar", "shove-curves", "switches", "sweep", "strategies-menagerie", "net-accuracy"),
     "ablation": ("robustness-gaits", "robust-library"),
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
+    "transitions": ("net-curve",),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
@@ -86,7 +90,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "net-accuracy-switch-start": accuracy_table(switch_start_accuracy),
               "robustness-gaits": robustness_table(ablation), "robust-library": library_table(ablation),
               "routes": routes_table(evidence_dir, goal=ROBUST_GOAL), "routes-switch-start": routes_table(earlier),
-              "map": map_table(evidence_dir)}
+              "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name)}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -39,14 +40,16 @@ from benchmarks.results.switches import SWITCH_GOALS
 from gaitlib.strategies.fitting import PAPER_PAIRS
 
 __all__ = [
-    "ACCURACY", "GOAL", "INPUTS", "ROBUST_GOAL", "SWITCH_START_ACCURACY", "accuracy_table", "pairs_table",
-    "quality_bar", "routes_table",
+    "ACCURACY", "CURVE", "GOAL", "INPUTS", "ROBUST_GOAL", "SWITCH_START_ACCURACY", "accuracy_table", "curve_table",
+    "pairs_table", "quality_bar", "routes_table",
 ]
 
 ACCURACY = ROOT / "library" / "switching" / "accuracy.json"
 """The shipped transition-net's accuracy report (paper Table 3's measure), written by ``gaitlib fit``."""
 SWITCH_START_ACCURACY = ROOT / "library-switch-start" / "switching" / "accuracy.json"
 """The accuracy report of the transition-net of the library shipped before (switch-start)."""
+CURVE = EVIDENCE / "curve-150n-200k.json"
+"""The transition-net's learning curve on the shipped library's pushed collection (``gaitlib fit --curve``)."""
 GOAL = 0.99
 """The success a switch is counted against (the switch-start library's routes)."""
 ROBUST_GOAL = next(g.goal for g in SWITCH_GOALS if (g.name, g.strategy) == ("bench-0n", "net-lookahead"))
@@ -248,3 +251,24 @@ def accuracy_table(path: Path = ACCURACY) -> str:
              f"samples, {labels}."]
     return "\n".join([*lines, "", " ".join(n for n in notes if n), "",
                       f"Evidence: `{shown(path)}`, written by `{command}` (the data and inputs the file records)."])
+
+
+def curve_table(path: Path = CURVE) -> str:
+    """The transition-net's held-out accuracy against the samples collected a pair (``gaitlib fit --curve``), with
+    what each step up the curve gained per doubling of the collection."""
+    evidence = read_evidence(Path(path))
+    if evidence is None:
+        return not_yet(Path(path))
+    result = evidence["result"]
+    lines = ["| collected a pair | balanced samples trained on, all pairs | mean held-out accuracy | gain a doubling "
+             "| lowest pair | highest pair |", "|---|---|---|---|---|---|"]
+    before = None
+    for point in result["points"]:
+        n, acc, pairs = point["samples_per_pair"], point["mean_accuracy"], point["accuracy"]
+        low, high = min(pairs, key=pairs.get), max(pairs, key=pairs.get)
+        gain = "-" if before is None else f"{100 * (acc - before[1]) / math.log2(n / before[0]):+.1f} points"
+        lines.append(f"| {n:,} | {point['trained_on']:,} | {pct(acc)}% | {gain} | {pct(pairs[low])}% ({low}) "
+                     f"| {pct(pairs[high])}% ({high}) |")
+        before = (n, acc)
+    return "\n".join([*lines, "", f"The `{result['input']}` net, {result['epochs']} epochs, seed {result['seed']}, "
+                      f"a fifth of each pair held out; evidence: {cite(Path(path), evidence)}."])
