@@ -131,14 +131,18 @@ def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
 
 
-def test_the_staged_steering_skills_are_whole_entries_awaiting_their_switching_models() -> None:
-    """library-steer holds the six steering skills, each a whole entry (policy, identity, evaluation); its one problem
-    is the switching models it does not have yet, with the commands that make them."""
-    status = json.loads(gaitlib_quick("library", "--library", str(REPO / "library-steer"), "--json").stdout)
-    assert sorted(status["gaits"]) == ["sidestep_left", "sidestep_right", "trot_back", "trot_left", "trot_right",
-                                       "turn_left"]
+@pytest.mark.parametrize(("folder", "skills", "problems"), [
+    ("library-steer", ["sidestep_left", "sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"],
+     ["no switching models yet (transition-net, TMT)"]),
+    ("library-recover", ["trot_in_place"], []),  # one gait alone: no pair to switch, nothing missing
+])
+def test_the_staged_skills_are_whole_entries_awaiting_their_switching_models(folder, skills, problems) -> None:
+    """library-steer holds the six steering skills, library-recover the recovery skill, each a whole entry (policy,
+    identity, evaluation); the steering skills' one problem is the switching models they do not have yet."""
+    status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
+    assert sorted(status["gaits"]) == skills
     assert all(g["problem"] is None and g["eval_episodes"] == 256 for g in status["gaits"].values())
-    assert [p["text"] for p in status["problems"]] == ["no switching models yet (transition-net, TMT)"]
+    assert [p["text"] for p in status["problems"]] == problems
 
 
 def readme_recipe(readme: Path) -> Recipe:
