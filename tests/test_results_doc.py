@@ -580,3 +580,24 @@ def test_every_strategy_on_another_a1_from_small_evidence(tmp_path: Path, eviden
     _store(evidence, "menagerie-strategies", held)
     made = _flat(tables.render_tables(evidence, tmp_path / "no-accuracy.json")["strategies-menagerie"])
     assert f"| `net` | 96.0 {_interval(1344, 1400)} (24.0%) | - |" in made and "`net` is" not in made
+
+
+def test_a_skill_is_held_to_each_line_of_the_bar() -> None:
+    """A staged skill's evaluation misses the bar on each line alone: falls over 1%, a speed or yaw rate more than 10%
+    from a moving reference's or more than 0.05 from a zero one, a median heading error over 15 degrees."""
+    from benchmarks.results.skills import skill_misses
+
+    steering = {"lateral_speed": 0.0, "reference_lateral_speed": 0.0, "yaw_rate": 0.5, "reference_yaw_rate": 0.5,
+                "median_heading_error_deg": 11.0}
+    good = {"fall_rate": 0.0, "forward_speed": 0.5, "reference_speed": 0.5, "median_heading_change_deg": 60.0,
+            "steering": steering}
+    assert skill_misses(good) == []  # a turning skill's heading is the turning reference's, not the starting one
+    assert skill_misses(good | {"fall_rate": 0.012}) == ["falls 1.2%"]
+    assert skill_misses(good | {"forward_speed": 0.56}) == ["forward 0.560 m/s against 0.500"]
+    assert skill_misses(good | {"forward_speed": 0.54}) == []
+    assert skill_misses(good | {"steering": steering | {"lateral_speed": 0.051}}) == ["lateral 0.051 m/s against 0.000"]
+    assert skill_misses(good | {"steering": steering | {"yaw_rate": 0.44}}) == ["yaw rate 0.440 rad/s against 0.500"]
+    assert skill_misses(good | {"steering": steering | {"median_heading_error_deg": 15.05}}) == ["heading 15.05 deg"]
+    still = {"fall_rate": 0.0, "forward_speed": -0.014, "reference_speed": 0.0, "median_heading_change_deg": 3.9}
+    assert skill_misses(still) == [] and skill_misses(still | {"median_heading_change_deg": 16.0}) == [
+        "heading 16.00 deg"]

@@ -5,12 +5,13 @@
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
 ``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
-``docs/switching_results.md`` (the switches in detail) and ``docs/transitions.md`` (the net's learning curve).
+``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve) and
+``docs/skills.md`` (the staged skills beyond the six gaits).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
-:mod:`~benchmarks.results.switches` and :mod:`~benchmarks.results.sweep`; how evidence is read and written is
-:mod:`benchmarks.results.evidence`.
+:mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep` and :mod:`~benchmarks.results.skills`; how
+evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from benchmarks.results.headline import (
     routes_table,
 )
 from benchmarks.results.robustness import library_table, robustness_table, shove_table
+from benchmarks.results.skills import skills_bar, skills_shoves
 from benchmarks.results.sweep import HELD_OUT, sweep_table
 from benchmarks.results.switches import map_table, switches_table
 from gaitlib.atomic import atomic_path
@@ -49,6 +51,7 @@ PAGES = {
     "ablation": ("robustness-gaits", "robust-library"),
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
+    "skills": ("skills-bar", "skills-shoves"),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
@@ -90,7 +93,9 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "net-accuracy-switch-start": accuracy_table(switch_start_accuracy),
               "robustness-gaits": robustness_table(ablation), "robust-library": library_table(ablation),
               "routes": routes_table(evidence_dir, goal=ROBUST_GOAL), "routes-switch-start": routes_table(earlier),
-              "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name)}
+              "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name),
+              "skills-bar": skills_bar(Path(evidence_dir).parent),
+              "skills-shoves": skills_shoves(Path(evidence_dir).parent)}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 
