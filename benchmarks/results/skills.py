@@ -28,13 +28,13 @@ STILL = 0.05
 """Where the reference's forward or lateral speed or yaw rate is 0, how far the skill's may stray: m/s, rad/s."""
 
 
-def _staged(results: Path) -> list[tuple[str, Path, dict]]:
-    """Every staged skill with an evaluation: its name, its staging folder and its evaluation's evidence, in the
-    order of :data:`STAGED`, then by name."""
+def _staged(results: Path) -> list[tuple[str, Path, Path, dict]]:
+    """Every staged skill with an evaluation: its name, its evidence folder, its staging folder and its evaluation's
+    evidence, in the order of :data:`STAGED`, then by name."""
     found = []
     for evidence_folder, staging in STAGED.items():
         for path in sorted((Path(results) / evidence_folder).glob("eval-*.json")):
-            found.append((path.stem.removeprefix("eval-"), ROOT / staging, read_evidence(path)))
+            found.append((path.stem.removeprefix("eval-"), path.parent, ROOT / staging, read_evidence(path)))
     return found
 
 
@@ -81,7 +81,7 @@ def skills_bar(results: Path = ROOT / "docs" / "results") -> str:
         return not_yet(Path(results) / "steer" / "eval-SKILL.json")
     lines = ["| skill | folder | reference | trained | falls [95%] | forward | lateral | yaw rate | median heading "
              "error | meets the bar |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for name, folder, evidence in staged:
+    for name, _, folder, evidence in staged:
         result = evidence["result"]
         meta = json.loads((folder / name / "metadata.json").read_text(encoding="utf-8"))
         ref, training = meta["description"], meta["training"]
@@ -95,9 +95,9 @@ def skills_bar(results: Path = ROOT / "docs" / "results") -> str:
                      f"{training['wall_clock_s'] / 60:.1f} min | {falls} of {result['episodes']} "
                      f"{interval(*result['fall_ci95'])} | {' | '.join(cells)} | {_heading(result):.2f} deg "
                      f"| {'no: ' + '; '.join(misses) if misses else 'yes'} |")
-    meeting = sum(not skill_misses(e["result"]) for _, _, e in staged)
+    meeting = sum(not skill_misses(e["result"]) for *_, e in staged)
     return "\n".join([*lines, "", f"{meeting} of {len(staged)} skills meet the bar: at most {pct(BAR_FALLS)}% falls "
-                      f"in {staged[0][2]['result']['episodes']} episodes of {staged[0][2]['result']['seconds']:g} s; "
+                      f"in {staged[0][3]['result']['episodes']} episodes of {staged[0][3]['result']['seconds']:g} s; "
                       f"forward speed, lateral speed and yaw rate each within {pct(BAR_SPEED)}% of the reference, or "
                       f"within {STILL} m/s and {STILL} rad/s where the reference's is 0; a median heading error of at "
                       f"most {BAR_HEADING_DEG:g} deg (a turning reference's heading where it turns, else the "
@@ -110,13 +110,13 @@ def skills_bar(results: Path = ROOT / "docs" / "results") -> str:
 
 def skills_shoves(results: Path = ROOT / "docs" / "results") -> str:
     """Each staged skill under one shove of each impulse, and under the paper's pushes of up to 50 N."""
-    rows = []
-    for name, _, _ in _staged(results):
-        folder = next(Path(results) / f for f in STAGED if (Path(results) / f / f"eval-{name}.json").is_file())
+    rows, impulses = [], None
+    for name, folder, _, _ in _staged(results):
         shoves, pushes = read_evidence(folder / f"shove-{name}.json"), read_evidence(folder / f"push50-{name}.json")
         if shoves is None or pushes is None:
             continue
         points = {p["impulse_ns"]: p for p in shoves["result"]["points"]}
+        impulses = impulses or list(points)
         cells = [f"{pct(p['fall_rate'])}% {interval(*wilson_interval(p['falls'], p['episodes']))}"
                  for p in points.values()]
         sectors = points[12.0]["by_sector"]
@@ -127,9 +127,9 @@ def skills_shoves(results: Path = ROOT / "docs" / "results") -> str:
                     f"| {round(push['fall_rate'] * push['episodes'])} of {push['episodes']} |")
     if not rows:
         return not_yet(Path(results) / "steer" / "shove-SKILL.json")
-    impulses = " | ".join(f"{i:g} N s [95%]" for i in points)
-    return "\n".join([f"| skill | {impulses} | worst direction at 12 N s | `--push-max 50` |",
-                      "|---|" + "---|" * (len(points) + 2), *rows, "",
+    header = " | ".join(f"{i:g} N s [95%]" for i in impulses)
+    return "\n".join([f"| skill | {header} | worst direction at 12 N s | `--push-max 50` |",
+                      "|---|" + "---|" * (len(impulses) + 2), *rows, "",
                       "One 0.1 s shove per episode in a random direction, 1,024 episodes a point, and 256 episodes of "
                       "20 s under the paper's random pushes of up to 50 N; falls by the `trunk` definition, 95% Wilson "
                       "intervals. Evidence: " + "; ".join(f"`{shown(Path(results) / f)}/shove-SKILL.json` and "
