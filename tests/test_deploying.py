@@ -7,6 +7,8 @@ import importlib.util
 import json
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import mujoco
@@ -21,6 +23,7 @@ from gaitlib.gaits import GaitDescription, clip_from_description, get_gait
 from gaitlib.library.deployment import deployment_block
 from gaitlib.library.export import export_onnx
 from gaitlib.library.layout import shipped_library_dir
+from gaitlib.library.onnx_graph import graph_signature
 from gaitlib.library.policy import build_models
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
@@ -119,6 +122,39 @@ def test_the_block_states_the_numbers_the_environment_uses(trot_entry: Path) -> 
     assert block["observation"]["gravity"]["upright_value"] == [0.0, 0.0, -1.0]
     assert block["onnx"]["inputs"][0]["shape"][-1] == block["observation"]["size"]
     assert block["onnx"]["outputs"][0]["shape"][-1] == len(block["robot"]["joint_names"])
+
+
+def test_the_signature_reader_agrees_with_onnx_on_every_model_in_the_repository(tmp_path) -> None:
+    """Every ``policy.onnx`` of the repository's libraries, shipped and staged, reads as the ``onnx`` package reads
+    it; bytes that are not a whole model raise :class:`ValueError`."""
+    import onnx
+
+    def by_onnx(values) -> list[dict]:
+        return [{"name": v.name, "shape": [d.dim_value or d.dim_param for d in v.type.tensor_type.shape.dim],
+                 "dtype": onnx.helper.tensor_dtype_to_np_dtype(v.type.tensor_type.elem_type).name} for v in values]
+
+    models = sorted(ROOT.glob("library*/**/*.onnx"))
+    assert len(models) >= 13  # the six gaits' policies and the staged skills' at least
+    for path in models:
+        graph = onnx.load(str(path)).graph
+        assert graph_signature(path) == {"inputs": by_onnx(graph.input), "outputs": by_onnx(graph.output)}, path
+    whole = models[0].read_bytes()
+    for cut in (whole[:40], whole[: len(whole) // 2], b"\x0a\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff\x01"):
+        (tmp_path / "cut.onnx").write_bytes(cut)
+        with pytest.raises(ValueError, match="protobuf"):
+            graph_signature(tmp_path / "cut.onnx")
+
+
+def test_loading_the_library_does_not_import_onnx() -> None:
+    """A command's start loads every entry and checks its ``policy.onnx`` without the ``onnx`` package (about 0.9 s
+    of import; ``docs/benchmarks.md``, "A command's start")."""
+    script = ("import sys\nfrom gaitlib.library import Library\nlibrary = Library(sys.argv[1])\n"
+              "[library.entry(g) for g in library.gaits()]\n"
+              "print(sorted(m for m in sys.modules if m.split('.')[0] in ('onnx', 'ml_dtypes')))")
+    done = subprocess.run([sys.executable, "-c", script, str(shipped_library_dir())], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
 
 
 @pytest.mark.parametrize("gait", ["stand", "trot", "pace"])

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import shutil
 import signal
-import subprocess
-import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +20,7 @@ from gaitlib.gaits import get_gait
 from gaitlib.library import Library, LibraryError, publish
 from gaitlib.library.policy import build_models
 from gaitlib.strategies.fitting import fit_library
+from gaitlib.transitions import read
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
 
 
@@ -90,41 +91,32 @@ def test_fitting_on_data_of_other_policies_is_refused_before_anything_is_written
 
 # A child process rewrites a library folder and is killed (SIGKILL, as by the OOM killer or `kill -9`) at a chosen
 # point; the library must then hold the old version or the new one, whole.
-_KILLED_WRITER = """
-import os, signal, sys
-from pathlib import Path
+def _killed_writer(root: Path, where: str, data: Path | None) -> None:
+    """A writer killed (SIGKILL, nothing cleaned up) at ``where``: replacing the stand's entry with new weights, or
+    in the middle of a fit. Runs in a forked child (:func:`_kill_a_writer`), so its patches never reach this
+    process."""
+    import torch
 
-import torch
+    torch.set_num_threads(1)  # a forked child keeps none of the parent's intra-op threads
 
-from gaitlib.library import Library
-from gaitlib.library import publish
-from gaitlib.transitions import read
+    def die(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGKILL)
 
-root, where = Path(sys.argv[1]), sys.argv[2]
-library = Library(root)
+    library = Library(root)
+    if where == "before-swap":
+        publish._swap_in = die
+    elif where == "after-swap":
+        publish.shutil.rmtree = die  # removes the old version, the step after the exchange
+    elif where == "between-renames":  # a system that cannot exchange two folders: the two-rename fallback
+        publish.exchange = lambda a, b: False
+        rename, calls = os.rename, []
+        os.rename = lambda a, b: calls.append(a) or (die() if len(calls) == 2 else rename(a, b))
+    elif where == "mid-fit":
+        import gaitlib.strategies.fitting as fitting
 
-
-def die(*args, **kwargs):
-    os.kill(os.getpid(), signal.SIGKILL)
-
-
-if where == "before-swap":
-    publish._swap_in = die
-elif where == "after-swap":
-    publish.shutil.rmtree = die  # removes the old version, the step after the exchange
-elif where == "between-renames":  # a system that cannot exchange two folders: the two-rename fallback
-    publish.exchange = lambda a, b: False
-    rename, calls = os.rename, []
-    os.rename = lambda a, b: calls.append(a) or (die() if len(calls) == 2 else rename(a, b))
-elif where == "mid-fit":
-    import gaitlib.strategies.fitting as fitting
-
-    fitting.save_table = die  # the net is written, the TMT and accuracy not yet
-if where == "mid-fit":
-    from gaitlib.strategies.fitting import fit_library
-
-    fit_library(library, read(sys.argv[3]), sources=[sys.argv[3]], epochs=1, seed=1, min_per_label=0)
-else:
+        fitting.save_table = die  # the net is written, the TMT and accuracy not yet
+        fit_library(library, read(data), sources=[str(data)], epochs=1, seed=1, min_per_label=0)
+        return
     entry = library.entry("stand")
     with torch.no_grad():
         next(entry.policy.actor.parameters()).add_(1.0)  # new weights: a new identity
@@ -133,7 +125,15 @@ else:
         networks=entry.metadata["networks"], action=entry.action, observation=entry.observation, training={},
         evaluation={},
     )
-"""
+
+
+def _kill_a_writer(root: Path, where: str, data: Path | None = None) -> int:
+    """:func:`_killed_writer` in a child forked from this process (its imports done: no interpreter to start);
+    the child's exit code, ``-SIGKILL`` where the kill came."""
+    child = multiprocessing.get_context("fork").Process(target=_killed_writer, args=(root, where, data))
+    child.start()
+    child.join(timeout=120)
+    return child.exitcode
 
 
 @pytest.mark.parametrize(
@@ -144,8 +144,7 @@ def test_a_writer_killed_while_replacing_an_entry_leaves_the_old_or_the_new_one(
 ) -> None:
     library = copy_library(tiny_library, tmp_path / "library")
     old = library.identities()
-    done = subprocess.run([sys.executable, "-c", _KILLED_WRITER, str(library.root), where], capture_output=True)
-    assert done.returncode == -signal.SIGKILL, done.stderr.decode()
+    assert _kill_a_writer(library.root, where) == -signal.SIGKILL
     after = Library(library.root)
     assert after.gaits() == ("stand", "trot") and after.identities()["trot"] == old["trot"]
     assert (after.identities()["stand"] == old["stand"]) == (survivor == "old")
@@ -162,10 +161,7 @@ def test_a_fit_killed_midway_leaves_the_previous_switching_models_whole(switchin
     library = copy_library(Library(switching_library), tmp_path / "library")
     before = {p.name: p.read_bytes() for p in library.switching_dir.iterdir()}
     data = switching_library.parent / "samples.h5"
-    done = subprocess.run(
-        [sys.executable, "-c", _KILLED_WRITER, str(library.root), "mid-fit", str(data)], capture_output=True
-    )
-    assert done.returncode == -signal.SIGKILL, done.stderr.decode()
+    assert _kill_a_writer(library.root, "mid-fit", data) == -signal.SIGKILL
     assert {p.name: p.read_bytes() for p in library.switching_dir.iterdir()} == before
 
 

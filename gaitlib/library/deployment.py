@@ -19,6 +19,7 @@ import torch
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs.reference import ReferenceTracker
 from gaitlib.gaits import ReferenceClip
+from gaitlib.library.onnx_graph import graph_signature
 from gaitlib.robots import RobotSpec, get_robot
 from gaitlib.rotations import yaw_of
 
@@ -227,21 +228,9 @@ def _segments(fields: tuple[obs_fn.Field, ...]) -> list[dict]:
 
 
 def _onnx_facts(path: Path) -> dict:
-    import onnx
-
-    graph = onnx.load(str(path)).graph
-
-    def tensors(values) -> list[dict]:
-        return [
-            {"name": v.name, "shape": [d.dim_value or d.dim_param for d in v.type.tensor_type.shape.dim],
-             "dtype": onnx.helper.tensor_dtype_to_np_dtype(v.type.tensor_type.elem_type).name}
-            for v in values
-        ]
-
     return {
         "file": path.name,
-        "inputs": tensors(graph.input),
-        "outputs": tensors(graph.output),
+        **graph_signature(path),
         "note": "the observation normalizer is inside the model: feed the raw observation; the output is the "
         "deterministic action before clipping",
     }
