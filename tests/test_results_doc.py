@@ -601,3 +601,49 @@ def test_a_skill_is_held_to_each_line_of_the_bar() -> None:
     still = {"fall_rate": 0.0, "forward_speed": -0.014, "reference_speed": 0.0, "median_heading_change_deg": 3.9}
     assert skill_misses(still) == [] and skill_misses(still | {"median_heading_change_deg": 16.0}) == [
         "heading 16.00 deg"]
+
+
+def _guarded_shove(falls: int, sectors: dict[str, int], catches: list[int], *, impulse: float = 12.0) -> dict:
+    """One guarded point of ``gaitlib eval --impulses --guard`` (256 episodes a direction); ``catches`` their delays
+    in control steps, a negative one before the shove."""
+    guard = {"on": True, "catches": [{"delay_steps": d} for d in catches], "false_catches": sum(d < 0 for d in catches),
+             "delay_steps_median": float(sorted(catches)[len(catches) // 2]) if catches else None,
+             "measured_gait_share": 0.97}
+    return {"impulse_ns": impulse, "episodes": 1024, "falls": falls, "guard": guard,
+            "by_sector": {name: [sectors.get(name, 0), 256] for name in ("front", "left", "back", "right")}}
+
+
+def test_the_guard_tables_from_small_evidence(tmp_path: Path) -> None:
+    """Each gait guarded beside unguarded on the same draws, the shipped gaits first and a skill after them, bold
+    only within the goal; a tag with no evaluation stored says so."""
+    from benchmarks.results.guard import guard_pushes, guard_shoves
+
+    unguarded = _guarded_shove(40, {"left": 30}, []) | {"guard": {"on": False}}
+    _store(tmp_path, "shove-12-trot_in_place-t", {"points": [_guarded_shove(0, {}, [])],
+                                                  "unguarded_points": [unguarded]})
+    _store(tmp_path, "shove-12-pace-t", {"points": [_guarded_shove(10, {"left": 3, "right": 7}, [-2, 1, 3, 3])],
+                                         "unguarded_points": [unguarded]})
+    _store(tmp_path, "shove-18-pace-t", {"points": [_guarded_shove(110, {"back": 110}, [1], impulse=18.0)],
+                                         "unguarded_points": [unguarded]})
+    _store(tmp_path, "shove-12-pace-other", {"points": [], "unguarded_points": []})  # another guard's: not read
+    rows = guard_shoves("t", tmp_path).splitlines()[2:5]
+    assert rows == [
+        "| pace | 12 N s | 40 (3.9% [2.9, 5.3]) | **10 (1.0% [0.5, 1.8])** | right, 7 of 256 | 4 (1) | 3 steps "
+        "| 97.0% |",
+        "| trot_in_place | 12 N s | 40 (3.9% [2.9, 5.3]) | **0 (0.0% [0.0, 0.4])** | none | 0 (0) | - | 97.0% |",
+        "| pace | 18 N s | 40 (3.9% [2.9, 5.3]) | 110 (10.7% [9.0, 12.8]) | back, 110 of 256 | 1 (0) | 1 step "
+        "| 97.0% |",
+    ]
+    run = {"episodes": 1024, "seconds": 20.0, "falls": 11, "minutes": 338.6, "catches_per_min": 0.5,
+           "guard": {"catches": [{}] * 3, "measured_gait_share": 0.9996}}
+    _store(tmp_path, "push50-walk-t", {"guarded": run | {"push_max_n": 50.0},
+                                       "unguarded": run | {"push_max_n": 50.0, "falls": 30}})
+    _store(tmp_path, "pace-0n-t", {"guarded": run | {"push_max_n": 0.0, "falls": 0},
+                                   "unguarded": run | {"push_max_n": 0.0, "falls": 0}})
+    assert guard_pushes("t", tmp_path).splitlines()[2:4] == [
+        "| walk | up to 50 N, 339 minutes | 30 (2.9% [2.1, 4.2]) | 11 (1.1% [0.6, 1.9]) | 3 (0.50 /min) | 99.96% |",
+        "| pace | none, 339 minutes | 0 (0.0% [0.0, 0.4]) | 0 (0.0% [0.0, 0.4]) | 3 (0.50 /min, every one false) "
+        "| 99.96% |",
+    ]
+    assert guard_shoves("none", tmp_path).startswith("Not yet measured:")
+    assert guard_pushes("none", tmp_path).startswith("Not yet measured:")

@@ -5,13 +5,13 @@
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
 ``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
-``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve) and
-``docs/skills.md`` (the staged skills beyond the six gaits).
+``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve),
+``docs/skills.md`` (the staged skills beyond the six gaits) and ``docs/switching.md`` (the guard).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
-:mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep` and :mod:`~benchmarks.results.skills`; how
-evidence is read and written is :mod:`benchmarks.results.evidence`.
+:mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills` and
+:mod:`~benchmarks.results.guard`; how evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
+from benchmarks.results.guard import guard_pushes, guard_shoves
 from benchmarks.results.headline import (
     ACCURACY,
     CURVE,
@@ -52,6 +53,7 @@ PAGES = {
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
     "skills": ("skills-bar", "skills-shoves"),
+    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
@@ -95,7 +97,9 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "routes": routes_table(evidence_dir, goal=ROBUST_GOAL), "routes-switch-start": routes_table(earlier),
               "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name),
               "skills-bar": skills_bar(Path(evidence_dir).parent),
-              "skills-shoves": skills_shoves(Path(evidence_dir).parent)}
+              "skills-shoves": skills_shoves(Path(evidence_dir).parent),
+              **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard")
+                 for tag in ("best-f0",) for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))}}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 
