@@ -1,6 +1,8 @@
 """The test suite as CI runs it: ``git clone`` of a commit into a fresh folder, then ``CI=true bash .ci/run`` there
 (its venv, its install, the whole suite), timed. Prints one JSON line, the row of ``docs/benchmarks.md``'s "The test
-suite": the commit, pytest's summary, and the time of the install, the tests and the whole run, s.
+suite": the commit, pytest's summary, the time of the install, the tests and the whole run, s, and the machine's
+speed that moment: the time of a fixed reference computation (:func:`reference_seconds`) just before the clone, so
+that runs on days the machine is slower or faster can be told apart.
 
     python benchmarks/clean_clone_suite.py [--repo .] [--commit main] [--out suite.json]
 
@@ -20,11 +22,31 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["SUMMARY", "clean_clone_run", "main"]
+__all__ = ["REFERENCE", "SUMMARY", "clean_clone_run", "main", "reference_seconds"]
 
 SUMMARY = re.compile(r"(\d+ (?:passed|failed|error).*?) in ([0-9.]+)s")
 """pytest's last line, e.g. ``==== 445 passed, 3 skipped in 203.12s (0:03:23) ====``: the counts and the tests'
 time, s."""
+
+
+REFERENCE = (
+    "import time, torch\n"
+    "torch.set_num_threads(1)\n"
+    "a = torch.randn(256, 256, generator=torch.Generator().manual_seed(0))\n"
+    "start = time.perf_counter()\n"
+    "for _ in range(2000):\n"
+    "    a = torch.tanh(a @ a.T / 16.0)\n"
+    "print(time.perf_counter() - start)\n"
+)
+"""The reference computation: 2,000 products of two 256 x 256 float32 matrices on one thread, the same on every
+commit (it uses none of gaitlib's code), timed inside a fresh interpreter."""
+
+
+def reference_seconds(runs: int = 3) -> float:
+    """The median time of :data:`REFERENCE` over ``runs`` fresh interpreters, s."""
+    times = sorted(float(subprocess.run([sys.executable, "-c", REFERENCE], capture_output=True, text=True,
+                                        check=True).stdout) for _ in range(runs))
+    return round(times[len(times) // 2], 3)
 
 
 def _git(*args: str) -> str:
@@ -62,7 +84,8 @@ def main() -> None:
     parser.add_argument("--commit", default="main", help="the commit to clone (default: main)")
     parser.add_argument("--out", type=Path, default=None, help="also write the run here as JSON")
     args = parser.parse_args()
-    run = clean_clone_run(args.repo, args.commit)
+    reference = reference_seconds()  # before the clone's run, on the same idle cores
+    run = clean_clone_run(args.repo, args.commit) | {"reference_s": reference}
     print(json.dumps(run))
     if args.out is not None:
         from gaitlib.atomic import write_json

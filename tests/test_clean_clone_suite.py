@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.clean_clone_suite import clean_clone_run
+from benchmarks.clean_clone_suite import clean_clone_run, reference_seconds
 
 RUN = """#!/usr/bin/env bash
 set -euo pipefail
@@ -41,3 +41,7 @@ def test_an_unknown_commit_is_refused_in_one_line(tmp_path: Path) -> None:
     repo = _repo(tmp_path / "repo")
     with pytest.raises(SystemExit, match=r"^clean_clone_suite: .*repo has no commit 'no-such-commit'$"):
         clean_clone_run(repo, "no-such-commit")
+
+
+def test_the_reference_computation_is_timed_in_a_fresh_interpreter() -> None:
+    assert 0 < reference_seconds(runs=1) < 60
