@@ -4,10 +4,12 @@ suite": the commit, pytest's summary, the time of the install, the tests and the
 speed that moment: the time of a fixed reference computation (:func:`reference_seconds`) just before the clone, so
 that runs on days the machine is slower or faster can be told apart.
 
-    python benchmarks/clean_clone_suite.py [--repo .] [--commit main] [--out suite.json]
+    python benchmarks/clean_clone_suite.py [--repo .] [--commit main] [--empty-warp-cache] [--out suite.json]
 
 Run it with nothing else on the cores. "tests" is the time pytest reports on its last line; "install" the rest of the
-run (the venv, ``pip install``, pytest's start).
+run (the venv, ``pip install``, pytest's start). The Newton tests compile Warp's kernels into Warp's kernel cache
+(``~/.cache/warp``), which a clone does not reset: ``--empty-warp-cache`` gives the run a cache folder of its own,
+empty at its start (``WARP_CACHE_PATH``), as on a fresh CI machine; the row's ``warp_cache`` says which it was.
 """
 
 from __future__ import annotations
@@ -56,9 +58,10 @@ def _git(*args: str) -> str:
     return done.stdout.strip()
 
 
-def clean_clone_run(repo: Path, commit: str) -> dict:
+def clean_clone_run(repo: Path, commit: str, *, empty_warp_cache: bool = False) -> dict:
     """``repo`` at ``commit`` cloned into a temporary folder and ``CI=true bash .ci/run`` run there: the commit, the
-    exit code, pytest's summary and the install's, the tests' and the whole run's time, s."""
+    exit code, pytest's summary, the install's, the tests' and the whole run's time, s, and ``warp_cache``: ``empty``
+    (a fresh folder of the clone's as ``WARP_CACHE_PATH``) or ``warm`` (the machine's own cache)."""
     known = subprocess.run(["git", "-C", str(repo), "rev-parse", "--verify", "--quiet", "--short",
                             f"{commit}^{{commit}}"], capture_output=True, text=True, check=False)
     if known.returncode != 0:
@@ -68,24 +71,30 @@ def clean_clone_run(repo: Path, commit: str) -> dict:
         clone = Path(folder) / "clone"
         _git("clone", "--quiet", "--no-checkout", str(Path(repo).resolve()), str(clone))
         _git("-C", str(clone), "checkout", "--quiet", sha)
+        env = os.environ | {"CI": "true"}
+        if empty_warp_cache:
+            (cache := Path(folder) / "warp-cache").mkdir()
+            env["WARP_CACHE_PATH"] = str(cache)
         start = time.perf_counter()
-        done = subprocess.run(["bash", ".ci/run"], cwd=clone, env=os.environ | {"CI": "true"}, capture_output=True,
-                              text=True, check=False)
+        done = subprocess.run(["bash", ".ci/run"], cwd=clone, env=env, capture_output=True, text=True, check=False)
         total = time.perf_counter() - start
     found = [m for line in done.stdout.splitlines() if (m := SUMMARY.search(line))]
     summary, tests = (found[-1].group(1), float(found[-1].group(2))) if found else (None, None)
     return {"commit": sha, "returncode": done.returncode, "summary": summary, "install_s": None if tests is None
-            else round(total - tests, 1), "tests_s": tests, "total_s": round(total, 1)}
+            else round(total - tests, 1), "tests_s": tests, "total_s": round(total, 1),
+            "warp_cache": "empty" if empty_warp_cache else "warm"}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repo", type=Path, default=Path(__file__).resolve().parents[1], help="the repository")
     parser.add_argument("--commit", default="main", help="the commit to clone (default: main)")
+    parser.add_argument("--empty-warp-cache", action="store_true",
+                        help="give the run an empty Warp kernel cache of its own, as on a fresh CI machine")
     parser.add_argument("--out", type=Path, default=None, help="also write the run here as JSON")
     args = parser.parse_args()
     reference = reference_seconds()  # before the clone's run, on the same idle cores
-    run = clean_clone_run(args.repo, args.commit) | {"reference_s": reference}
+    run = clean_clone_run(args.repo, args.commit, empty_warp_cache=args.empty_warp_cache) | {"reference_s": reference}
     print(json.dumps(run))
     if args.out is not None:
         from gaitlib.atomic import write_json

@@ -35,6 +35,18 @@ def test_a_clean_clone_of_the_commit_runs_its_ci_and_is_timed(tmp_path: Path) ->
                           check=True).stdout.strip()
     assert (run["commit"], run["returncode"], run["summary"], run["tests_s"]) == (head, 0, "4 passed, 1 skipped", 0.1)
     assert run["total_s"] >= 0.3 and run["install_s"] == round(run["total_s"] - 0.1, 1)
+    assert run["warp_cache"] == "warm"
+
+
+def test_an_empty_warp_cache_is_a_fresh_folder_of_the_run(tmp_path: Path) -> None:
+    repo = _repo(tmp_path / "repo")
+    empty = '[ -d "$WARP_CACHE_PATH" ] && [ -z "$(ls -A "$WARP_CACHE_PATH")" ]'  # the run fails unless it is given one
+    (repo / ".ci" / "run").write_text(RUN.replace("sleep 0.3", empty))
+    subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t", "commit", "--quiet", "-am",
+                    "checks its cache"], check=True)
+    assert clean_clone_run(repo, "HEAD")["returncode"] != 0  # the machine's cache: WARP_CACHE_PATH unset here
+    run = clean_clone_run(repo, "HEAD", empty_warp_cache=True)
+    assert (run["returncode"], run["warp_cache"]) == (0, "empty")
 
 
 def test_an_unknown_commit_is_refused_in_one_line(tmp_path: Path) -> None:

@@ -146,8 +146,8 @@ def test_the_signature_reader_agrees_with_onnx_on_every_model_in_the_repository(
 
 
 def test_loading_the_library_does_not_import_onnx() -> None:
-    """A command's start loads every entry and checks its ``policy.onnx`` without the ``onnx`` package (about 0.9 s
-    of import; ``docs/benchmarks.md``, "A command's start")."""
+    """A command's start loads every entry and checks its ``policy.onnx`` without the ``onnx`` package (about 0.7 s
+    of a start; ``docs/benchmarks.md``, "A command's start")."""
     script = ("import sys\nfrom gaitlib.library import Library\nlibrary = Library(sys.argv[1])\n"
               "[library.entry(g) for g in library.gaits()]\n"
               "print(sorted(m for m in sys.modules if m.split('.')[0] in ('onnx', 'ml_dtypes')))")

@@ -1,14 +1,14 @@
 """The inputs and outputs of an ONNX model, read from its protobuf bytes without the ``onnx`` package.
 
 Every library entry's ``deployment`` block is checked against its ``policy.onnx`` each time the entry loads
-(:func:`gaitlib.library.validate.check_deployment`). Importing ``onnx`` for that took about 0.9 s of each command's
-start (its ``ml_dtypes`` extension), for four facts a graph's signature holds: each input's and output's name,
-element type and shape. This module decodes just those fields of the ONNX protobuf schema (``onnx/onnx.proto``,
-github.com/onnx/onnx): ``ModelProto.graph`` (7), ``GraphProto.input`` (11) and ``output`` (12),
-``ValueInfoProto.name`` (1) and ``type`` (2), ``TypeProto.tensor_type`` (1), ``TypeProto.Tensor.elem_type`` (1) and
-``shape`` (2), ``TensorShapeProto.dim`` (1), ``Dimension.dim_value`` (1) and ``dim_param`` (2). Other fields are
-skipped by their wire type; a repeated singular field merges as protobuf merges it (messages concatenated, the
-last scalar wins). Malformed bytes raise :class:`ValueError`.
+(:func:`gaitlib.library.validate.check_deployment`). Importing ``onnx`` for that took about 0.7 s of each command's
+start (with its ``ml_dtypes`` extension; ``docs/benchmarks.md``, "A command's start"), for four facts a graph's
+signature holds: each input's and output's name, element type and shape. This module decodes just those fields of the
+ONNX protobuf schema (``onnx/onnx.proto``, github.com/onnx/onnx): ``ModelProto.graph`` (7), ``GraphProto.input`` (11)
+and ``output`` (12), ``ValueInfoProto.name`` (1) and ``type`` (2), ``TypeProto.tensor_type`` (1),
+``TypeProto.Tensor.elem_type`` (1) and ``shape`` (2), ``TensorShapeProto.dim`` (1), ``Dimension.dim_value`` (1) and
+``dim_param`` (2). Other fields are skipped by their wire type; a repeated singular field merges as protobuf merges it
+(messages concatenated, the last scalar wins). Malformed bytes raise :class:`ValueError`.
 """
 
 from __future__ import annotations
