@@ -38,13 +38,14 @@ def test_a_clean_clone_of_the_commit_runs_its_ci_and_is_timed(tmp_path: Path) ->
     assert run["warp_cache"] == "warm"
 
 
-def test_an_empty_warp_cache_is_a_fresh_folder_of_the_run(tmp_path: Path) -> None:
+def test_an_empty_warp_cache_is_a_fresh_folder_of_the_run(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.delenv("WARP_CACHE_PATH", raising=False)  # even when this suite runs in an empty cache
     repo = _repo(tmp_path / "repo")
     empty = '[ -d "$WARP_CACHE_PATH" ] && [ -z "$(ls -A "$WARP_CACHE_PATH")" ]'  # the run fails unless it is given one
     (repo / ".ci" / "run").write_text(RUN.replace("sleep 0.3", empty))
     subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t", "commit", "--quiet", "-am",
                     "checks its cache"], check=True)
-    assert clean_clone_run(repo, "HEAD")["returncode"] != 0  # the machine's cache: WARP_CACHE_PATH unset here
+    assert clean_clone_run(repo, "HEAD")["returncode"] != 0  # the machine's cache: no WARP_CACHE_PATH
     run = clean_clone_run(repo, "HEAD", empty_warp_cache=True)
     assert (run["returncode"], run["warp_cache"]) == (0, "empty")
 
