@@ -8,8 +8,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import torch
 
 from gaitlib.atomic import CHECKSUM_KEY, json_checksum
+from gaitlib.envs.observations import ObservationConfig
 from gaitlib.library import Library
 from gaitlib.sim import make_backend
 
@@ -94,6 +96,37 @@ def write_foreign_json(path: Path, payload: dict) -> None:
     """Write ``payload`` with its matching checksum as another writer could: nan and infinities as Python's default
     writer spells them, which gaitlib's own writer refuses (a reader must still refuse them)."""
     path.write_text(json.dumps(payload | {CHECKSUM_KEY: json_checksum(payload)}))
+
+
+def rsl_rl_models(*, actor_hidden: tuple[int, ...], critic_hidden: tuple[int, ...], activation: str = "elu",
+                  observation: ObservationConfig) -> tuple[object, object]:
+    """Fresh (untrained) rsl-rl actor and critic laid out as training makes them (``rsl_rl_config``): what
+    ``Library.save_entry`` writes."""
+    from rsl_rl.models import MLPModel
+    from tensordict import TensorDict
+
+    obs = TensorDict({"policy": torch.zeros(1, observation.actor_dim),
+                      "privileged": torch.zeros(1, observation.privileged_dim)}, batch_size=[1])
+    groups = {"actor": ["policy"], "critic": ["policy", "privileged"]}
+    actor = MLPModel(obs, groups, "actor", 12, hidden_dims=list(actor_hidden), activation=activation,
+                     obs_normalization=True,
+                     distribution_cfg={"class_name": "rsl_rl.modules.distribution.GaussianDistribution"})
+    critic = MLPModel(obs, groups, "critic", 1, hidden_dims=list(critic_hidden), activation=activation,
+                      obs_normalization=True)
+    return actor, critic
+
+
+def trained_models(library: Library, gait: str) -> tuple[object, object]:
+    """The rsl-rl actor and critic of ``library``'s entry ``gait``, its ``policy.pt`` weights loaded: what
+    ``Library.save_entry`` writes again."""
+    entry = library.entry(gait)
+    nets = entry.metadata["networks"]
+    actor, critic = rsl_rl_models(actor_hidden=tuple(nets["actor_hidden"]), critic_hidden=tuple(nets["critic_hidden"]),
+                                  activation=nets["activation"], observation=entry.observation)
+    state = torch.load(library.root / gait / "policy.pt", weights_only=True)
+    actor.load_state_dict(state["actor"])
+    critic.load_state_dict(state["critic"])
+    return actor, critic
 
 
 def copy_library(library: Library, folder: Path) -> Library:

@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 import torch
+from conftest import rsl_rl_models
 
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs import observations as obs_fn
@@ -24,7 +25,6 @@ from gaitlib.library.deployment import deployment_block
 from gaitlib.library.export import export_onnx
 from gaitlib.library.layout import shipped_library_dir
 from gaitlib.library.onnx_graph import graph_signature
-from gaitlib.library.policy import build_models
 from gaitlib.robots import get_robot
 from gaitlib.sim import make_backend
 
@@ -95,7 +95,7 @@ def test_the_loop_sees_what_the_environment_sees_and_the_robot_stays_up(trot_ent
         heights, uprightness = [], []
         for step, (obs, action) in enumerate(_load_example().deploy(model, data, trot_entry, 2.0)):
             if step < 10:
-                expected = env.get_observations()["policy"][0].numpy()
+                expected = env.get_observations().policy[0].numpy()
                 np.testing.assert_allclose(obs, expected, atol=1e-5, err_msg=f"control step {step}")
                 env.step(torch.as_tensor(action, dtype=torch.float32).unsqueeze(0))
             heights.append(data.qpos[2])
@@ -192,8 +192,7 @@ def test_the_loop_follows_a_turning_reference_across_its_cycles(tmp_path) -> Non
     clip = clip_from_description(turn)
     entry = tmp_path / "turn_left"
     entry.mkdir()
-    actor, _ = build_models(actor_hidden=(8,), critic_hidden=(8,), activation="elu", num_actions=12,
-                            observation=obs_fn.ObservationConfig())
+    actor, _ = rsl_rl_models(actor_hidden=(8,), critic_hidden=(8,), observation=obs_fn.ObservationConfig())
     with torch.no_grad():
         for parameter in actor.parameters():
             parameter.zero_()
@@ -212,7 +211,7 @@ def test_the_loop_follows_a_turning_reference_across_its_cycles(tmp_path) -> Non
         data.qpos[:] = torch.cat([s.root_pos[0], s.root_quat[0], s.joint_pos[0]]).double().numpy()
         data.qvel[:] = torch.cat([s.root_lin_vel[0], s.root_ang_vel[0], s.joint_vel[0]]).double().numpy()
         for step, (obs, action) in enumerate(_load_example().deploy(model, data, entry, 0.8)):
-            expected = env.get_observations()["policy"][0].numpy()
+            expected = env.get_observations().policy[0].numpy()
             np.testing.assert_allclose(obs, expected, atol=1e-4, err_msg=f"control step {step}")
             assert not env.step(torch.as_tensor(action, dtype=torch.float32).unsqueeze(0))[2].any()
         assert step + 1 == 24 and env.reference.phase[0].item() > 1.5 and not action.any()

@@ -37,9 +37,9 @@ def make_env(clips, names=("trot",), n=4, **cfg):
 def test_vec_env_contract(clips) -> None:
     env = make_env(clips, n=3)
     obs = env.get_observations()
-    assert obs["policy"].shape == (3, obs_fn.ObservationConfig().actor_dim) == (3, 159)
-    assert obs["privileged"].shape == (3, obs_fn.PRIVILEGED_DIM)
-    assert obs["policy"].dtype == torch.float32
+    assert obs.policy.shape == (3, obs_fn.ObservationConfig().actor_dim) == (3, 159)
+    assert obs.privileged.shape == (3, obs_fn.PRIVILEGED_DIM)
+    assert obs.policy.dtype == torch.float32
     assert env.num_actions == 12 and env.max_episode_length == 300
     obs, reward, dones, extras = env.step(torch.zeros(3, 12))
     assert reward.shape == (3,) and reward.dtype == torch.float32
@@ -148,9 +148,9 @@ def test_observations_are_deterministic_without_randomization(clips) -> None:
     for _ in range(5):
         oa = a.step(actions)[0]
         ob = b.step(actions)[0]
-    assert torch.equal(oa["policy"], ob["policy"])
+    assert torch.equal(oa.policy, ob.policy)
     # s_t holds the last three frames, newest first, with the previous action at the end of each frame.
-    frame = oa["policy"][:, : obs_fn.FRAME_DIM]
+    frame = oa.policy[:, : obs_fn.FRAME_DIM]
     assert torch.allclose(frame[:, -12:], actions)
 
 
@@ -198,19 +198,19 @@ def test_preview_switch_shows_the_observations_a_switch_would_give_and_changes_n
     env = make_env(clips, names=("trot", "pace"), n=3, randomization=RandomizationConfig(enabled=False))
     for _ in range(5):
         env.step(torch.zeros(3, 12))
-    before = env.get_observations().clone()
+    before = env.get_observations().policy.clone()
     phase_before, gait_before = env.phase.clone(), env.gait.clone()
     candidates = torch.tensor([0.1, 0.6])
     ids = torch.tensor([0, 2])
     preview = env.preview_switch(ids, torch.tensor([1, 1]), candidates)
-    assert preview.batch_size == torch.Size([4])
-    assert torch.equal(env.get_observations()["policy"], before["policy"])
+    assert len(preview) == 4
+    assert torch.equal(env.get_observations().policy, before)
     assert torch.equal(env.phase, phase_before) and torch.equal(env.gait, gait_before)
     env.switch(torch.tensor([2]), torch.tensor([1]), torch.tensor([0.6]))
     after = env.get_observations()
     for key in ("policy", "privileged"):  # world 2 at the second candidate: rows are world-major
-        assert torch.allclose(preview[key][3], after[key][2], atol=1e-5)
-    assert not torch.allclose(preview["policy"][2], preview["policy"][3])
+        assert torch.allclose(getattr(preview, key)[3], getattr(after, key)[2], atol=1e-5)
+    assert not torch.allclose(preview.policy[2], preview.policy[3])
 
 
 def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) -> None:
@@ -230,7 +230,7 @@ def test_observation_layout_is_what_the_shipped_policies_were_trained_on(clips) 
     # The critic sees kp in units of the default stiffness and the push in units of 100 N, at the declared columns.
     env = make_env(clips, n=2, pushes=PushConfig(max_force=150.0, fixed_force=True, interval=(0.03, 0.04)))
     for _ in range(3):
-        privileged = env.step(torch.zeros(2, 12))[0]["privileged"]
+        privileged = env.step(torch.zeros(2, 12))[0].privileged
     columns = itertools.accumulate([0, *(f.width for f in obs_fn.PRIVILEGED)])
     where = {f.name: slice(a, a + f.width) for f, a in zip(obs_fn.PRIVILEGED, columns, strict=False)}
     assert torch.allclose(privileged[:, where["kp"]].squeeze(1), env.world_parameters.kp / 60.0)
@@ -260,7 +260,7 @@ def test_the_actor_sees_its_heading_error(clips) -> None:
         start = env.reference.frame()
         start.root_quat = quat_multiply(quat_from_yaw(torch.tensor([0.4, -0.2])), start.root_quat)
         env.backend.reset(torch.arange(2), start)
-    with_heading, without = (env.step(torch.zeros(2, 12))[0]["policy"] for env in envs)
+    with_heading, without = (env.step(torch.zeros(2, 12))[0].policy for env in envs)
     assert with_heading.shape == (2, 159) and without.shape == (2, 158)
     torch.testing.assert_close(with_heading[:, -1], torch.tensor([-0.4, 0.2]), atol=0.01, rtol=0)
     torch.testing.assert_close(with_heading[:, :-1], without)

@@ -78,7 +78,7 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
             fires = guard.fires(reading)
             fired.append(bool(fires.any()))
             assert not (fires & ~reading.armed).any() and (step >= 2 or not reading.armed.any())  # (a fall restarts)
-            obs = env.get_observations()["policy"].cpu().numpy()
+            obs = env.get_observations().policy.cpu().numpy()
             imu = env.trunk_acceleration.cpu().numpy()
             for w in range(3):
                 gait = setup.gaits[int(env.gait[w])]

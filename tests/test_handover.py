@@ -59,13 +59,13 @@ def test_a_handover_gives_the_policy_what_a_switch_would(tiny_library) -> None:
     ids, dest, phase = torch.tensor([0, 1]), torch.tensor([0, 0]), torch.tensor([0.25, 0.7])
     handed = {k: v.cpu().numpy() for k, v in source.handover_states(ids).items()}
     source.switch(ids, dest, phase)  # the meta-controller's handover: trot to stand
-    expected = source.get_observations()["policy"]
+    expected = source.get_observations().policy
 
     taker = ImitationEnv(make_backend("mujoco", num_worlds=2), clips, cfg, seed=9)  # other dynamics, other start
     taker.reset_worlds(ids, gait=dest)
     recorded = HandoverStates(gaits=("stand", "trot"), identities={}, settings={}, **handed)
     taker.hand_over(ids, recorded, phase)
-    torch.testing.assert_close(taker.get_observations()["policy"], expected, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(taker.get_observations().policy, expected, atol=1e-5, rtol=1e-5)
     assert taker.gait.tolist() == [0, 0]
     torch.testing.assert_close(taker.sim_state.joint_vel, source.sim_state.joint_vel)
 

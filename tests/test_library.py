@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import copy_library, write_foreign_json
+from conftest import copy_library, rsl_rl_models, trained_models, write_foreign_json
 
 from gaitlib.atomic import write_json
 from gaitlib.envs.observations import ObservationConfig
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library, LibraryError, publish
-from gaitlib.library.policy import build_models
 from gaitlib.strategies.fitting import fit_library
 from gaitlib.transitions import read
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader
@@ -118,10 +117,11 @@ def _killed_writer(root: Path, where: str, data: Path | None) -> None:
         fit_library(library, read(data), sources=[str(data)], epochs=1, seed=1, min_per_label=0)
         return
     entry = library.entry("stand")
+    actor, critic = trained_models(library, "stand")
     with torch.no_grad():
-        next(entry.policy.actor.parameters()).add_(1.0)  # new weights: a new identity
+        next(actor.parameters()).add_(1.0)  # new weights: a new identity
     library.save_entry(
-        description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+        description=entry.description, actor=actor, critic=critic,
         networks=entry.metadata["networks"], action=entry.action, observation=entry.observation, training={},
         evaluation={},
     )
@@ -149,8 +149,9 @@ def test_a_writer_killed_while_replacing_an_entry_leaves_the_old_or_the_new_one(
     assert after.gaits() == ("stand", "trot") and after.identities()["trot"] == old["trot"]
     assert (after.identities()["stand"] == old["stand"]) == (survivor == "old")
     entry = after.entry("stand")  # whole: its checksum and files agree
+    actor, critic = trained_models(after, "stand")
     after.save_entry(  # the next write cleans what the killed one left
-        description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+        description=entry.description, actor=actor, critic=critic,
         networks=entry.metadata["networks"], action=entry.action, observation=entry.observation, training={},
         evaluation={},
     )
@@ -168,10 +169,11 @@ def test_a_fit_killed_midway_leaves_the_previous_switching_models_whole(switchin
 def test_a_second_writer_of_an_entry_is_refused_in_one_line(tiny_library, tmp_path) -> None:
     library = copy_library(tiny_library, tmp_path / "library")
     entry = library.entry("stand")
+    actor, critic = trained_models(library, "stand")
     held = rf"library/stand is being written by process {os.getpid()} \(.+\)$"
     with publish._writer_lock(library.root / "stand"), pytest.raises(GaitlibError, match=held):
         library.save_entry(
-            description=entry.description, actor=entry.policy.actor, critic=entry.policy.critic,
+            description=entry.description, actor=actor, critic=critic,
             networks=entry.metadata["networks"], action=entry.action, observation=entry.observation,
             training={}, evaluation={},
         )
@@ -223,9 +225,7 @@ def test_entries_that_read_other_observations_are_not_mixed(tiny_library, tmp_pa
     library = copy_library(tiny_library, tmp_path / "library")
     entry = library.entry("stand")
     old = ObservationConfig(heading=False)
-    actor, critic = build_models(
-        actor_hidden=(32, 16), critic_hidden=(32, 16), activation="elu", num_actions=12, observation=old
-    )
+    actor, critic = rsl_rl_models(actor_hidden=(32, 16), critic_hidden=(32, 16), observation=old)
     library.save_entry(
         description=get_gait("pace"), actor=actor, critic=critic, networks=entry.metadata["networks"],
         action=entry.action, observation=old, training={}, evaluation={},

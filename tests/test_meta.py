@@ -26,7 +26,7 @@ class Tagged(torch.nn.Module):
         self.policy, self.tag = policy, tag
 
     def act(self, obs):
-        return torch.full((obs.batch_size[0], 12), self.tag)
+        return torch.full((len(obs), 12), self.tag)
 
     def latent(self, obs):
         return self.policy.latent(obs)

@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import errno
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from conftest import REPO, rsl_rl_models
 
 from gaitlib.atomic import write_json
 from gaitlib.defaults import Falls
+from gaitlib.envs.observations import ObservationBatch, ObservationConfig
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library, LibraryError
+from gaitlib.library.policy import GaitPolicy
 from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 
@@ -63,17 +68,64 @@ def test_training_changes_the_policy_and_writes_an_entry(trained) -> None:
 def test_latent_and_value_have_documented_shapes(trained) -> None:
     tmp_path, _, _ = trained
     entry = Library(tmp_path / "library").entry("stand")
-    from tensordict import TensorDict
-
-    obs = TensorDict({"policy": torch.randn(5, 159), "privileged": torch.randn(5, 14)}, batch_size=[5])
+    obs = ObservationBatch(policy=torch.randn(5, 159), privileged=torch.randn(5, 14))
     action, latent = entry.policy.act_and_latent(obs)
     assert action.shape == (5, 12) and latent.shape == (5, 16) and entry.policy.value(obs).shape == (5,)
     assert torch.allclose(action, entry.policy.act(obs))
 
 
+@pytest.mark.parametrize("activation", ["elu", "tanh"])
+def test_the_loaded_policy_computes_what_rsl_rl_s_model_computes_bit_for_bit(activation) -> None:
+    """The library's plain-torch policy on rsl-rl's weights: the same actions, latents and values, bit for bit,
+    with non-trivial normalizer statistics."""
+    from tensordict import TensorDict
+
+    gen = torch.Generator().manual_seed(3)
+    config = ObservationConfig()
+    actor, critic = rsl_rl_models(actor_hidden=(24, 16), critic_hidden=(20, 12), activation=activation,
+                                  observation=config)
+    with torch.no_grad():
+        for model in (actor, critic):
+            for tensor in model.state_dict().values():
+                if tensor.is_floating_point():
+                    tensor.copy_(torch.rand(tensor.shape, generator=gen) + 0.1)  # std > 0, means off 0
+    actor.eval(), critic.eval()
+    policy = GaitPolicy.from_state({"actor": actor.state_dict(), "critic": critic.state_dict()},
+                                   actor_hidden=(24, 16), critic_hidden=(20, 12), activation=activation,
+                                   num_actions=12, observation=config)
+    x, extra = torch.randn(9, 159, generator=gen) * 3, torch.randn(9, 14, generator=gen)
+    obs, groups = ObservationBatch(policy=x, privileged=extra), TensorDict({"policy": x, "privileged": extra},
+                                                                          batch_size=[9])
+    with torch.inference_mode():
+        assert torch.equal(policy.act(obs), actor(groups))
+        assert torch.equal(policy.latent(obs), torch.nn.Sequential(*list(actor.mlp)[:-1])(actor.get_latent(groups)))
+        assert torch.equal(policy.value(obs), critic(groups).squeeze(-1))
+    assert policy.latent_dim == 16 and policy.actor_dim == 159
+    with pytest.raises(RuntimeError, match="size mismatch"):
+        GaitPolicy.from_state({"actor": actor.state_dict(), "critic": critic.state_dict()}, actor_hidden=(24, 8),
+                              critic_hidden=(20, 12), activation=activation, num_actions=12, observation=config)
+
+
+def test_a_command_that_runs_policies_imports_neither_rsl_rl_nor_tensordict() -> None:
+    """Loading the shipped library and running the meta-controller leaves rsl-rl and TensorDict (and with it
+    torch._dynamo) unimported: what every command that does not train pays at its start."""
+    code = (
+        "import sys\n"
+        "from gaitlib.meta import load_switching\n"
+        "from gaitlib.sim import make_backend\n"
+        "setup = load_switching(None)\n"
+        "controller = setup.controller(setup.make_env(make_backend('mujoco', num_worlds=2)), 'net-lookahead')\n"
+        "controller.request([0], setup.gait_index('stand'))\n"
+        "for _ in range(3): controller.step()\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'rsl_rl', 'tensordict'}),\n"
+        "      'torch._dynamo' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["[]", "False"], out.stdout + out.stderr
+
+
 def test_onnx_export_has_a_batch_axis_and_matches_the_torch_actor(trained) -> None:
     import onnxruntime
-    from tensordict import TensorDict
 
     tmp_path, _, _ = trained
     entry = Library(tmp_path / "library").entry("stand")
@@ -82,7 +134,7 @@ def test_onnx_export_has_a_batch_axis_and_matches_the_torch_actor(trained) -> No
     assert [(io.name, io.shape) for io in session.get_inputs()] == [("obs", ["batch", 159])]
     assert [(io.name, io.shape) for io in session.get_outputs()] == [("actions", ["batch", 12])]
     x = torch.randn(7, 159, generator=torch.Generator().manual_seed(0))
-    expected = entry.policy.act(TensorDict({"policy": x, "privileged": torch.zeros(7, 14)}, batch_size=[7]))
+    expected = entry.policy.act(ObservationBatch(policy=x, privileged=torch.zeros(7, 14)))
     (got,) = session.run(None, {"obs": x.numpy()})
     np.testing.assert_allclose(got, expected.numpy(), atol=1e-5, rtol=1e-5)
 

@@ -220,7 +220,7 @@ class ChunkSamples(TrialSchedule):
         before = switch.observation
         self._latent[ids] = switch.latent
         self._value_source[ids] = per_gait(policies, switch.source, before, method="value")
-        self._explicit[ids] = explicit_state(before["policy"])
+        self._explicit[ids] = explicit_state(before.policy)
         self._phase_source[ids] = switch.phase_source
         self._phase_dest[ids] = switch.phase_dest
         self._switch_time[ids] = env.episode_length_buf[ids].float() * env.dt

@@ -221,7 +221,7 @@ def _states(env, policies, scorer, candidates, ids: torch.Tensor, obs, step: int
         "world": ids.cpu().numpy(), "gait": gait.cpu().numpy(), "phase": phase.cpu().numpy().astype(np.float32),
         "latent": latent.cpu().numpy().astype(np.float32),
         "value": per_gait(policies, gait, obs, method="value").reshape(-1).cpu().numpy().astype(np.float32),
-        "explicit": explicit_state(obs["policy"]).cpu().numpy().astype(np.float32),
+        "explicit": explicit_state(obs.policy).cpu().numpy().astype(np.float32),
         "imu": env.trunk_acceleration[ids].cpu().numpy().astype(np.float32),
         "offer": offer.cpu().numpy().astype(np.float32), "time_s": np.full(len(ids), step * env.dt),
     }

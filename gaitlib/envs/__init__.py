@@ -1,4 +1,4 @@
-"""The imitation environment (an rsl-rl VecEnv) and its parts: observations, rewards, terminations,
+"""The imitation environment and its parts: observations, rewards, terminations,
 randomization and pushes, per-world reference tracking."""
 
 from gaitlib.envs.imitation_env import EnvConfig, ImitationEnv

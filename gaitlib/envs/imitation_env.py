@@ -1,4 +1,5 @@
-"""The motion-imitation environment: an rsl-rl ``VecEnv`` of N A1 worlds, each imitating a gait's reference clip.
+"""The motion-imitation environment: N A1 worlds, each imitating a gait's reference clip, with rsl-rl's ``VecEnv``
+methods (``get_observations``, ``step``; training sees it through :mod:`gaitlib.training.vec_env`).
 
 One control step (30 Hz): the action (N, 12) is a residual around the reference pose one step ahead; with action
 noise it becomes the PD targets (clipped to the joint limits), which reach the servos after each world's action
@@ -20,8 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import torch
-from rsl_rl.env import VecEnv
-from tensordict import TensorDict
 
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs import rewards as rew_fn
@@ -75,8 +74,9 @@ class EnvConfig:
     the reward only."""
 
 
-class ImitationEnv(VecEnv):
-    """N worlds imitating reference clips on a simulation backend (rsl-rl ``VecEnv``)."""
+class ImitationEnv:
+    """N worlds imitating reference clips on a simulation backend; observations as
+    :class:`~gaitlib.envs.observations.ObservationBatch`."""
 
     def __init__(
         self,
@@ -125,15 +125,15 @@ class ImitationEnv(VecEnv):
         what an IMU's accelerometer reads at the control rate once the attitude's gravity is taken away (0 just
         after a reset). Read by the guard's survival estimate (its ``imu`` input), not by the policies."""
         self._terms = {term.name: torch.zeros(n, device=dev) for term in cfg.reward}
-        self._obs: TensorDict | None = None
+        self._obs: obs_fn.ObservationBatch | None = None
         self.reset_worlds(torch.arange(n, device=dev))
 
-    # ------------------------------------------------------------------------------------------ rsl-rl
-    def get_observations(self) -> TensorDict:
+    # ------------------------------------------------------------------------------------ rsl-rl's methods
+    def get_observations(self) -> obs_fn.ObservationBatch:
         assert self._obs is not None
         return self._obs
 
-    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+    def step(self, actions: torch.Tensor) -> tuple[obs_fn.ObservationBatch, torch.Tensor, torch.Tensor, dict]:
         cfg = self.cfg
         actions = actions.to(self.device).clamp(-cfg.action_clip, cfg.action_clip)
         self._action = actions
@@ -214,7 +214,9 @@ class ImitationEnv(VecEnv):
         self.reference.start(world_ids, gait, phase, s.root_pos[world_ids], s.root_quat[world_ids])
         self._obs = self._observations()
 
-    def preview_switch(self, world_ids: torch.Tensor, gait: torch.Tensor, phases: torch.Tensor) -> TensorDict:
+    def preview_switch(
+        self, world_ids: torch.Tensor, gait: torch.Tensor, phases: torch.Tensor
+    ) -> obs_fn.ObservationBatch:
         """The observations worlds ``world_ids`` (k,) would have right after ``switch`` to ``gait`` (k,) at each of
         the candidate ``phases`` (C,), as k * C rows (world-major); nothing changes in the environment."""
         k, c = len(world_ids), len(phases)
@@ -374,7 +376,7 @@ class ImitationEnv(VecEnv):
         reference: ReferenceTracker | None = None,
         rows: torch.Tensor | None = None,
         observed: Sequence[ReferenceFrame] | None = None,
-    ) -> TensorDict:
+    ) -> obs_fn.ObservationBatch:
         """Observations of every world under its reference, or of the worlds ``rows`` (R,) under ``reference`` (a
         tracker of R rows); ``observed``: the :meth:`_observed_frames` of every world, when already read."""
         reference = reference or self.reference
@@ -394,4 +396,4 @@ class ImitationEnv(VecEnv):
             self.push_force[ids],
             self._params.action_delay.to(self.device)[ids] if self.cfg.observation.critic_delay else None,
         )
-        return TensorDict({"policy": actor, "privileged": privileged}, batch_size=[len(actor)])
+        return obs_fn.ObservationBatch(policy=actor, privileged=privileged)

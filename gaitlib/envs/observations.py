@@ -44,6 +44,7 @@ __all__ = [
     "SENSED",
     "STATE_DIM",
     "Field",
+    "ObservationBatch",
     "ObservationConfig",
     "heading_error",
     "layout",
@@ -149,6 +150,23 @@ class ObservationConfig:
     def actor_dim(self) -> int:
         """Width of the actor observation."""
         return ACTOR_OBS_DIM + (width(HEADING) if self.heading else 0)
+
+
+@dataclass(frozen=True, slots=True)
+class ObservationBatch:
+    """The observations of N worlds: what each actor reads and what each critic reads beside it. Indexing by rows
+    (``obs[ids]``: indices, a mask or a slice) gives those worlds' observations."""
+
+    policy: torch.Tensor
+    """(N, :attr:`ObservationConfig.actor_dim`) the actor's observation."""
+    privileged: torch.Tensor
+    """(N, :attr:`ObservationConfig.privileged_dim`) the critic's extras; the critic reads ``policy`` then these."""
+
+    def __len__(self) -> int:
+        return len(self.policy)
+
+    def __getitem__(self, rows: torch.Tensor | slice) -> ObservationBatch:
+        return ObservationBatch(policy=self.policy[rows], privileged=self.privileged[rows])
 
 
 def layout(cfg: ObservationConfig = ObservationConfig()) -> dict[str, object]:

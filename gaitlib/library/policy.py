@@ -1,104 +1,136 @@
 """A trained gait policy in deployment form: observation normalizer + actor MLP, and the critic beside it.
 
-Built on rsl-rl's ``MLPModel`` so that weights trained by rsl-rl load as they are; exposes what switching needs:
-the deterministic action, the actor's last hidden layer (the latent psi) and the critic value.
+Plain torch, laid out as rsl-rl's ``MLPModel`` (``obs_normalizer``, ``mlp``: rsl-rl 5's state-dict keys) so that the
+weights rsl-rl trains load as they are, without importing rsl-rl or TensorDict at all: every command that runs
+policies without training them starts about 1.2 s sooner (``docs/benchmarks.md``, "A command's start"). The same
+weights give the same numbers, bit for bit, as rsl-rl's model (``tests/test_training.py``). Exposes what switching
+needs: the deterministic action, the actor's last hidden layer (the latent psi) and the critic value.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from itertools import pairwise
 from typing import Literal
 
 import torch
-from rsl_rl.models import MLPModel
-from tensordict import TensorDict
 
-from gaitlib.envs import observations as obs_fn
+from gaitlib.envs.observations import ObservationBatch, ObservationConfig
 
-__all__ = ["GaitPolicy", "build_models", "per_gait"]
+__all__ = ["ACTIVATIONS", "GaitPolicy", "per_gait"]
 
-OBS_GROUPS = {"actor": ["policy"], "critic": ["policy", "privileged"]}
-
-
-def _dummy_obs(observation: obs_fn.ObservationConfig) -> TensorDict:
-    return TensorDict(
-        {
-            "policy": torch.zeros(1, observation.actor_dim),
-            "privileged": torch.zeros(1, observation.privileged_dim),
-        },
-        batch_size=[1],
-    )
+ACTIVATIONS = {
+    "elu": torch.nn.ELU, "selu": torch.nn.SELU, "relu": torch.nn.ReLU, "crelu": torch.nn.CELU,
+    "lrelu": torch.nn.LeakyReLU, "tanh": torch.nn.Tanh, "sigmoid": torch.nn.Sigmoid, "softplus": torch.nn.Softplus,
+    "gelu": torch.nn.GELU, "swish": torch.nn.SiLU, "mish": torch.nn.Mish, "identity": torch.nn.Identity,
+}
+"""The hidden layers' activations by the names rsl-rl gives them (``rsl_rl.utils.resolve_nn_activation``)."""
 
 
-def build_models(
-    *,
-    actor_hidden: tuple[int, ...],
-    critic_hidden: tuple[int, ...],
-    activation: str,
-    num_actions: int,
-    observation: obs_fn.ObservationConfig,
-) -> tuple[MLPModel, MLPModel]:
-    """Fresh (untrained) actor and critic of the given sizes, laid out as in :func:`rsl_rl_config`, for actor
-    observations of the options ``observation``."""
-    obs = _dummy_obs(observation)
-    actor = MLPModel(
-        obs,
-        OBS_GROUPS,
-        "actor",
-        num_actions,
-        hidden_dims=list(actor_hidden),
-        activation=activation,
-        obs_normalization=True,
-        distribution_cfg={"class_name": "rsl_rl.modules.distribution.GaussianDistribution"},
-    )
-    critic = MLPModel(
-        obs, OBS_GROUPS, "critic", 1, hidden_dims=list(critic_hidden), activation=activation, obs_normalization=True
-    )
-    return actor, critic
+class _Normalizer(torch.nn.Module):
+    """rsl-rl's ``EmpiricalNormalization`` with its statistics frozen: ``(x - mean) / (std + eps)``."""
+
+    eps = 1e-2
+    """rsl-rl's default, the one ``MLPModel`` uses."""
+
+    def __init__(self, width: int) -> None:
+        super().__init__()
+        self.register_buffer("_mean", torch.zeros(1, width))
+        self.register_buffer("_var", torch.ones(1, width))  # loaded with the rest; rsl-rl updates it in training
+        self.register_buffer("_std", torch.ones(1, width))
+        self.register_buffer("count", torch.tensor(0, dtype=torch.long))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self._mean) / (self._std + self.eps)
+
+
+class _Model(torch.nn.Module):
+    """Normalizer then MLP: linear layers with ``activation`` between them, the last one linear."""
+
+    def __init__(self, width: int, hidden: Sequence[int], outputs: int, activation: str) -> None:
+        super().__init__()
+        self.obs_normalizer = _Normalizer(width)
+        act = ACTIVATIONS[activation.lower()]()
+        dims = [width, *hidden]
+        layers: list[torch.nn.Module] = []
+        for inputs, size in pairwise(dims):
+            layers += [torch.nn.Linear(inputs, size), act]
+        self.mlp = torch.nn.Sequential(*layers, torch.nn.Linear(dims[-1], outputs))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.mlp(self.obs_normalizer(x))
 
 
 class GaitPolicy(torch.nn.Module):
-    """Deterministic actor, latent and value of one trained gait (inputs: the environment's observation dict)."""
+    """Deterministic actor, latent and value of one trained gait (inputs: the environment's
+    :class:`~gaitlib.envs.observations.ObservationBatch`)."""
 
-    def __init__(self, actor: MLPModel, critic: MLPModel) -> None:
+    def __init__(self, actor: _Model, critic: _Model) -> None:
         super().__init__()
         self.actor = actor.eval()
         self.critic = critic.eval()
         layers = list(actor.mlp)
-        self._hidden = torch.nn.Sequential(*layers[:-1])  # shares the actor's modules
+        self.hidden = torch.nn.Sequential(*layers[:-1])  # shares the actor's modules
+        """The actor's hidden layers: normalized observation -> latent."""
         self._head = layers[-1]
+
+    @classmethod
+    def from_state(
+        cls,
+        state: Mapping[str, Mapping[str, torch.Tensor]],
+        *,
+        actor_hidden: Sequence[int],
+        critic_hidden: Sequence[int],
+        activation: str,
+        num_actions: int,
+        observation: ObservationConfig,
+    ) -> GaitPolicy:
+        """The policy of ``state`` (``{"actor": ..., "critic": ...}``: rsl-rl ``MLPModel`` state dicts) with the
+        given layer sizes. Raises ``KeyError`` for an unknown activation and ``RuntimeError`` for weights that do not
+        fit the sizes."""
+        actor = _Model(observation.actor_dim, actor_hidden, num_actions, activation)
+        critic = _Model(observation.actor_dim + observation.privileged_dim, critic_hidden, 1, activation)
+        # The actor's action distribution (its noise) plays no part in the deterministic action.
+        actor.load_state_dict({k: v for k, v in state["actor"].items() if not k.startswith("distribution.")})
+        critic.load_state_dict(state["critic"])
+        return cls(actor, critic)
 
     @property
     def latent_dim(self) -> int:
         """Size of the actor's last hidden layer."""
         return self._head.in_features
 
+    @property
+    def actor_dim(self) -> int:
+        """Width of the actor's observation."""
+        return self.actor.mlp[0].in_features
+
     @torch.inference_mode()
-    def act(self, obs: TensorDict) -> torch.Tensor:
+    def act(self, obs: ObservationBatch) -> torch.Tensor:
         """(N, 12) deterministic action (the Gaussian's mean), action units."""
-        return self.actor(obs)
+        return self.actor(obs.policy)
 
     @torch.inference_mode()
-    def latent(self, obs: TensorDict) -> torch.Tensor:
+    def latent(self, obs: ObservationBatch) -> torch.Tensor:
         """(N, latent_dim) the actor's last hidden layer activations (psi in the paper)."""
-        return self._hidden(self.actor.get_latent(obs))
+        return self.hidden(self.actor.obs_normalizer(obs.policy))
 
     @torch.inference_mode()
-    def act_and_latent(self, obs: TensorDict) -> tuple[torch.Tensor, torch.Tensor]:
+    def act_and_latent(self, obs: ObservationBatch) -> tuple[torch.Tensor, torch.Tensor]:
         """Action (N, 12) and latent (N, latent_dim) in one forward pass."""
-        hidden = self._hidden(self.actor.get_latent(obs))
+        hidden = self.hidden(self.actor.obs_normalizer(obs.policy))
         return self._head(hidden), hidden
 
     @torch.inference_mode()
-    def value(self, obs: TensorDict) -> torch.Tensor:
+    def value(self, obs: ObservationBatch) -> torch.Tensor:
         """(N,) critic value."""
-        return self.critic(obs).squeeze(-1)
+        return self.critic(torch.cat([obs.policy, obs.privileged], dim=-1)).squeeze(-1)
 
 
 def per_gait(
     policies: Sequence[GaitPolicy],
     gait: torch.Tensor,
-    obs: TensorDict,
+    obs: ObservationBatch,
     *,
     method: Literal["act", "latent", "value"] = "act",
 ) -> torch.Tensor:

@@ -47,7 +47,7 @@ from gaitlib.library.layout import (
     first_fit,
     gait_order,
 )
-from gaitlib.library.policy import GaitPolicy, build_models
+from gaitlib.library.policy import GaitPolicy
 from gaitlib.library.publish import recover, staged_folder
 from gaitlib.library.validate import check_action, check_deployment, check_metadata
 from gaitlib.robots import get_robot
@@ -360,20 +360,19 @@ def _load_entry(library: Path, name: str) -> LibraryEntry:
         state = torch.load(weights, map_location="cpu", weights_only=True)
         description = GaitDescription(**metadata["description"])
         nets = metadata["networks"]
-        actor, critic = build_models(
+        policy = GaitPolicy.from_state(
+            state,
             actor_hidden=tuple(nets["actor_hidden"]),
             critic_hidden=tuple(nets["critic_hidden"]),
             activation=nets["activation"],
             num_actions=get_robot(metadata.get("robot", "a1")).num_joints,
             observation=observation,
         )
-        actor.load_state_dict(state["actor"])
-        critic.load_state_dict(state["critic"])
         clip = clip_from_description(description)
     except (KeyError, TypeError, RuntimeError, ValueError, GaitlibError) as error:
         first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
         raise LibraryError(f"library entry '{name}' cannot be loaded: {first}") from error
-    entry = LibraryEntry(name=name, metadata=metadata, policy=GaitPolicy(actor, critic), description=description,
+    entry = LibraryEntry(name=name, metadata=metadata, policy=policy, description=description,
                          clip=clip)
     try:
         check_deployment(metadata, entry.clip, observation, entry.action_delay_steps, onnx)

@@ -10,17 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import torch
 
 from gaitlib.envs import ImitationEnv
+from gaitlib.envs.observations import ObservationBatch
 from gaitlib.library.policy import GaitPolicy, per_gait
 from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
-
-if TYPE_CHECKING:
-    from tensordict import TensorDict
 
 __all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
 
@@ -63,7 +60,7 @@ class SwitchDetail:
     """(k,) destination phase switched to, cycles."""
     latent: torch.Tensor
     """(k, L) the source actor's last hidden layer psi_m on the observation before the switch."""
-    observation: TensorDict
+    observation: ObservationBatch
     """(k,) rows of the environment's observations before the switch."""
 
 

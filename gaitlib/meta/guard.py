@@ -95,7 +95,7 @@ class Guard:
         latent = per_gait(policies, gait, obs, method="latent")
         needs = self.estimate.inputs
         value = per_gait(policies, gait, obs, method="value").reshape(-1) if "value" in needs else phase
-        explicit = explicit_state(obs["policy"]) if "explicit" in needs else None
+        explicit = explicit_state(obs.policy) if "explicit" in needs else None
         imu = env.trunk_acceleration[ids] if "imu" in needs else None
         features = survival_features(needs, len(env.clips), gait=gait, latent=latent, phase=phase, value=value,
                                      explicit=explicit, imu=imu)

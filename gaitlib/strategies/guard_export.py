@@ -52,7 +52,7 @@ class _Latent(torch.nn.Module):
     def __init__(self, policy) -> None:
         super().__init__()
         self.normalizer = policy.actor.obs_normalizer
-        self.hidden = policy._hidden
+        self.hidden = policy.hidden
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.hidden(self.normalizer(obs))
@@ -81,8 +81,7 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
     folder.mkdir(parents=True, exist_ok=True)
     gaits = estimate.gaits
     for gait, policy in zip(gaits, policies, strict=True):
-        obs_width = policy.actor.mlp[0].in_features
-        _export(_Latent(policy).cpu(), obs_width, folder / f"latent_{gait}.onnx", inputs="obs", output="latent")
+        _export(_Latent(policy).cpu(), policy.actor_dim, folder / f"latent_{gait}.onnx", inputs="obs", output="latent")
 
     class _Logit(torch.nn.Module):
         def __init__(self, model: torch.nn.Module) -> None:

@@ -37,6 +37,7 @@ from gaitlib.training.presets import TrainPreset, rsl_rl_config
 from gaitlib.training.recipe import Recipe
 from gaitlib.training.switch_start import handover_states
 from gaitlib.training.target import check_target
+from gaitlib.training.vec_env import RslRlEnv
 
 __all__ = ["GaitRunner", "IterationStats", "TrainRequest", "TrainResult", "resume_point", "train_gait"]
 
@@ -106,7 +107,7 @@ class GaitRunner(OnPolicyRunner):
 
     def __init__(self, env: ImitationEnv, request: TrainRequest) -> None:
         with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints the model structure
-            super().__init__(env, rsl_rl_config(request.preset), log_dir=None, device=str(env.device))
+            super().__init__(RslRlEnv(env), rsl_rl_config(request.preset), log_dir=None, device=str(env.device))
         self.logger = IterationLog(self)
         self.request = request
         """The run."""
@@ -305,6 +306,19 @@ def _train(
         leave()
 
 
+def _deployed(runner: GaitRunner) -> GaitPolicy:
+    """The trained actor and critic as the library will load them, on the training device."""
+    preset, alg = runner.request.preset, runner.alg
+    return GaitPolicy.from_state(
+        {"actor": alg.get_policy().state_dict(), "critic": alg.critic.state_dict()},
+        actor_hidden=preset.actor_hidden,
+        critic_hidden=preset.critic_hidden,
+        activation=preset.activation,
+        num_actions=runner.env.num_actions,
+        observation=runner.env.cfg.observation,
+    ).to(runner.device)
+
+
 def _finish(
     runner: GaitRunner, clip: ReferenceClip, backend_name: str, env_cfg: EnvConfig, switch_start: dict | None,
     *, in_sync: bool,
@@ -313,7 +327,7 @@ def _finish(
     request, preset, alg = runner.request, runner.request.preset, runner.alg
     alg.eval_mode()
     evaluation = evaluate_policy(
-        GaitPolicy(alg.get_policy(), alg.critic),
+        _deployed(runner),
         clip,
         env_cfg=env_cfg,
         episodes=request.eval_episodes,

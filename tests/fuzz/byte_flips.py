@@ -52,7 +52,6 @@ import numpy as np
 import torch
 from identity_kinds import overlap, resume_reader, resume_target, start_resumable_run
 from structured_edits import edit, edit_targets
-from tensordict import TensorDict
 
 from gaitlib import gaits
 from gaitlib.benchmark.results import load_results
@@ -60,6 +59,7 @@ from gaitlib.benchmark.routes import routes_from_results
 from gaitlib.benchmark.sweep import SweepConfig, run_sweep
 from gaitlib.collection import CollectConfig, collect
 from gaitlib.envs.handover import load_states
+from gaitlib.envs.observations import ObservationBatch
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits import get_gait
 from gaitlib.library import Library
@@ -103,7 +103,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         protocol=TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2)))
     routes_from_results(both, Library(library), strategy="random").save(Library(library))
     start_resumable_run(root, Path(gaits.__file__).parent / "descriptions" / "stand.toml")  # the shipped stand
-    probe = TensorDict({"policy": torch.linspace(-1, 1, 159).unsqueeze(0)}, batch_size=[1])
+    probe = ObservationBatch(policy=torch.linspace(-1, 1, 159).unsqueeze(0), privileged=torch.zeros(1, 14))
 
     def entry() -> object:
         loaded = Library(library).entry("stand")

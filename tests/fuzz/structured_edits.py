@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tensordict import TensorDict
 
 from gaitlib.atomic import CHECKSUM_KEY, json_checksum
 from gaitlib.benchmark.report import cell_results
 from gaitlib.benchmark.results import load_results, open_results
 from gaitlib.envs.handover import load_states
+from gaitlib.envs.observations import ObservationBatch
 from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
 from gaitlib.strategies.routes import load_routes
@@ -249,7 +249,7 @@ def edit_targets(root: Path, gaits: tuple[str, ...]) -> dict[str, EditTarget]:
 
     def entry() -> object:
         loaded = Library(library).entry("stand")
-        probe = TensorDict({"policy": torch.linspace(-1, 1, 159).unsqueeze(0)}, batch_size=[1])
+        probe = ObservationBatch(policy=torch.linspace(-1, 1, 159).unsqueeze(0), privileged=torch.zeros(1, 14))
         return loaded.metadata, loaded.policy.act(probe).numpy(), loaded.action_delay_steps, loaded.description
 
     def arrays(name: str, index: object, value: object) -> Callable[[dict], None]:
