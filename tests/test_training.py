@@ -104,6 +104,9 @@ def test_the_loaded_policy_computes_what_rsl_rl_s_model_computes_bit_for_bit(act
     with pytest.raises(RuntimeError, match="size mismatch"):
         GaitPolicy.from_state({"actor": actor.state_dict(), "critic": critic.state_dict()}, actor_hidden=(24, 8),
                               critic_hidden=(20, 12), activation=activation, num_actions=12, observation=config)
+    with pytest.raises(ValueError, match="unknown activation 'softsign' \\(rsl-rl's names: elu, selu, "):
+        GaitPolicy.from_state({"actor": actor.state_dict(), "critic": critic.state_dict()}, actor_hidden=(24, 16),
+                              critic_hidden=(20, 12), activation="softsign", num_actions=12, observation=config)
 
 
 def test_a_command_that_runs_policies_imports_neither_rsl_rl_nor_tensordict() -> None:

@@ -17,9 +17,9 @@ import torch
 
 from gaitlib.envs.observations import ObservationBatch, ObservationConfig
 
-__all__ = ["ACTIVATIONS", "GaitPolicy", "per_gait"]
+__all__ = ["GaitPolicy", "per_gait"]
 
-ACTIVATIONS = {
+_ACTIVATIONS = {
     "elu": torch.nn.ELU, "selu": torch.nn.SELU, "relu": torch.nn.ReLU, "crelu": torch.nn.CELU,
     "lrelu": torch.nn.LeakyReLU, "tanh": torch.nn.Tanh, "sigmoid": torch.nn.Sigmoid, "softplus": torch.nn.Softplus,
     "gelu": torch.nn.GELU, "swish": torch.nn.SiLU, "mish": torch.nn.Mish, "identity": torch.nn.Identity,
@@ -50,7 +50,9 @@ class _Model(torch.nn.Module):
     def __init__(self, width: int, hidden: Sequence[int], outputs: int, activation: str) -> None:
         super().__init__()
         self.obs_normalizer = _Normalizer(width)
-        act = ACTIVATIONS[activation.lower()]()
+        if activation.lower() not in _ACTIVATIONS:
+            raise ValueError(f"unknown activation '{activation}' (rsl-rl's names: {', '.join(_ACTIVATIONS)})")
+        act = _ACTIVATIONS[activation.lower()]()
         dims = [width, *hidden]
         layers: list[torch.nn.Module] = []
         for inputs, size in pairwise(dims):
@@ -86,7 +88,7 @@ class GaitPolicy(torch.nn.Module):
         observation: ObservationConfig,
     ) -> GaitPolicy:
         """The policy of ``state`` (``{"actor": ..., "critic": ...}``: rsl-rl ``MLPModel`` state dicts) with the
-        given layer sizes. Raises ``KeyError`` for an unknown activation and ``RuntimeError`` for weights that do not
+        given layer sizes. Raises ``ValueError`` for an unknown activation and ``RuntimeError`` for weights that do not
         fit the sizes."""
         actor = _Model(observation.actor_dim, actor_hidden, num_actions, activation)
         critic = _Model(observation.actor_dim + observation.privileged_dim, critic_hidden, 1, activation)
