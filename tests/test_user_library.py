@@ -120,9 +120,11 @@ def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> N
     ("library", ("bound", "pace", "pronk", "stand", "trot", "walk")),
     ("library-switch-start", ("bound", "pace", "pronk", "stand", "trot", "walk")),
     ("library-paper", ("pace", "stand", "trot")),
+    ("library-recover", ("bound", "pace", "pronk", "stand", "trot", "trot_in_place", "walk")),
 ])
 def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
-    """The shipped library and the two shipped before it (switch-start, the paper's recipe): every gait's policy,
+    """The shipped library, the two shipped before it (switch-start, the paper's recipe) and the one grown by the
+    recovery skill (its six gaits linked to the shipped library's files): every gait's policy,
     every ordered pair covered by switching models fitted on these very policies (identities and checksums agree),
     nothing to fix."""
     status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
@@ -131,14 +133,20 @@ def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
 
 
+def test_the_grown_library_holds_the_shipped_gaits_byte_for_byte() -> None:
+    """Growing the library by the recovery skill left the six gaits as they are: the same policies, by identity."""
+    shipped, grown = Library(REPO / "library"), Library(REPO / "library-recover")
+    assert {gait: grown.identities()[gait] for gait in shipped.gaits()} == shipped.identities()
+    assert set(grown.gaits()) - set(shipped.gaits()) == {"trot_in_place"}
+
+
 @pytest.mark.parametrize(("folder", "skills", "problems"), [
     ("library-steer", ["sidestep_left", "sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"],
      ["no switching models yet (transition-net, TMT)"]),
-    ("library-recover", ["trot_in_place"], []),  # one gait alone: no pair to switch, nothing missing
 ])
 def test_the_staged_skills_are_whole_entries_awaiting_their_switching_models(folder, skills, problems) -> None:
-    """library-steer holds the six steering skills, library-recover the recovery skill, each a whole entry (policy,
-    identity, evaluation); the steering skills' one problem is the switching models they do not have yet."""
+    """library-steer holds the six steering skills, each a whole entry (policy, identity, evaluation); their one
+    problem is the switching models they do not have yet."""
     status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
     assert sorted(status["gaits"]) == skills
     assert all(g["problem"] is None and g["eval_episodes"] == 256 for g in status["gaits"].values())
