@@ -43,7 +43,7 @@ from benchmarks.results.switches import map_table, switches_table
 from gaitlib.atomic import atomic_path
 
 __all__ = [
-    "DOC", "DOCS", "PAGES", "TABLES", "WIDTH", "check_doc", "fill", "first_difference", "main", "page_tables",
+    "DOC", "DOCS", "GUARDS", "PAGES", "TABLES", "WIDTH", "check_doc", "fill", "first_difference", "main", "page_tables",
     "render_tables", "write_doc",
 ]
 
@@ -53,9 +53,12 @@ PAGES = {
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
     "skills": ("skills-bar", "skills-shoves"),
-    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
+    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0", "guard-shoves-recover", "guard-pushes-recover"),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
+GUARDS = ("best-f0", "recover")
+"""The guards whose tables ``docs/switching.md`` shows, by the tag of their stored evaluations: the six gaits' and the
+library grown by the recovery skill's (``library-recover``)."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
 """The results pages, :data:`PAGES` in order."""
 DOC = DOCS[0]
@@ -98,8 +101,8 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name),
               "skills-bar": skills_bar(Path(evidence_dir).parent),
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
-              **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard")
-                 for tag in ("best-f0",) for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))}}
+              **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
+                 for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))}}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 
