@@ -27,9 +27,7 @@ class RslRlEnv(VecEnv):
     ``privileged``)."""
 
     def __init__(self, env: ImitationEnv) -> None:
-        self.env = env
-        self.num_envs, self.num_actions, self.device = env.num_envs, env.num_actions, env.device
-        self.max_episode_length, self.cfg = env.max_episode_length, env.cfg
+        self.env = env  # num_envs, num_actions, device, max_episode_length, cfg: the environment's own
 
     @property
     def episode_length_buf(self) -> torch.Tensor:
