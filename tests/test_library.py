@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from conftest import copy_library, rsl_rl_models, trained_models, write_foreign_json
 
 from gaitlib.atomic import write_json
@@ -156,6 +157,41 @@ def test_a_writer_killed_while_replacing_an_entry_leaves_the_old_or_the_new_one(
         evaluation={},
     )
     assert sorted(p.name for p in library.root.iterdir() if p.is_dir()) == ["stand", "trot"]
+
+
+def _new_stand(library: Library) -> None:
+    """Write the entry ``stand`` of ``library`` again, with new weights (a new identity)."""
+    entry = library.entry("stand")
+    actor, critic = trained_models(library, "stand")
+    with torch.no_grad():
+        next(actor.parameters()).add_(1.0)
+    library.save_entry(description=entry.description, actor=actor, critic=critic, networks=entry.metadata["networks"],
+                       action=entry.action, observation=entry.observation, training={}, evaluation={})
+
+
+@pytest.mark.parametrize("exchanges", [True, False], ids=["exchange", "two renames"])
+def test_an_entry_linked_to_another_librarys_is_replaced_by_its_own_and_the_other_is_untouched(
+    tiny_library, tmp_path, monkeypatch, exchanges
+) -> None:
+    """A grown library holds its first gaits as links to the library they came from; writing one replaces the link
+    with a folder of its own, leaves the linked folder byte for byte, and leaves nothing behind, also where a killed
+    writer left a link among its staging folders."""
+    first = copy_library(tiny_library, tmp_path / "first")
+    before = {p: p.read_bytes() for p in first.root.rglob("*") if p.is_file()}
+    grown = tmp_path / "grown"
+    grown.mkdir()
+    for gait in ("stand", "trot"):
+        (grown / gait).symlink_to(Path("..") / "first" / gait)
+    (grown / ".stand.killed").symlink_to(Path("..") / "first" / "stand")  # what a killed writer left
+    if not exchanges:
+        monkeypatch.setattr(publish, "exchange", lambda a, b: False)
+    _new_stand(Library(grown))
+    after = Library(grown)
+    assert not (grown / "stand").is_symlink() and (grown / "trot").is_symlink()
+    assert after.identities()["stand"] != first.identities()["stand"]
+    assert after.identities()["trot"] == first.identities()["trot"]
+    assert {p: p.read_bytes() for p in first.root.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in grown.iterdir() if p.name.startswith(".")) == []
 
 
 def test_a_fit_killed_midway_leaves_the_previous_switching_models_whole(switching_library, tmp_path) -> None:

@@ -7,6 +7,9 @@ old version and is removed. Where the system cannot exchange, the old folder is 
 the new one renamed into place; a kill between the two renames leaves ``<name>`` missing, and :func:`recover`
 (which the library calls before it lists or writes) puts the old folder back. Writers of one folder take an
 exclusive lock (``.<name>.lock`` beside it) and remove what killed writers left (``.<name>.*`` folders).
+
+A folder may be a symbolic link to another library's (a grown library holds its first gaits so): publishing
+replaces the link itself with a folder of its own, and the folder it pointed to is never written or removed.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ def exchange(a: Path, b: Path) -> bool:
 def recover(final: Path) -> None:
     """Undo a kill between the fallback's two renames: ``.<name>.old`` back to ``<name>`` if that is missing."""
     old = final.with_name(f".{final.name}.old")
-    if old.is_dir() and not final.exists():
+    if old.is_dir() and not final.exists() and not final.is_symlink():
         os.rename(old, final)
 
 
@@ -64,7 +67,7 @@ def staged_folder(final: Path) -> Iterator[Path]:
         recover(final)
         for leftover in final.parent.glob(f".{final.name}.*"):
             if leftover.is_dir():  # a staging or old folder of a killed writer (the lock says none is running)
-                shutil.rmtree(leftover, ignore_errors=True)
+                _remove(leftover, ignore_errors=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
         try:
             staging.chmod(0o755)  # mkdtemp makes it private; library folders are meant to be shared
@@ -73,6 +76,8 @@ def staged_folder(final: Path) -> Iterator[Path]:
             _swap_in(staging, final)
         except OSError as error:  # a full disk: name the file of the folder being published, not the staging one
             shutil.rmtree(staging, ignore_errors=True)
+            if error.errno is None:  # not the system's: its own message says what happened
+                raise
             if error.filename is None:  # a write to an open file: the folder is what was being written
                 raise OSError(error.errno, error.strerror, str(final)) from error
             if not Path(error.filename).is_relative_to(staging):
@@ -85,16 +90,25 @@ def staged_folder(final: Path) -> Iterator[Path]:
 
 
 def _swap_in(staging: Path, final: Path) -> None:
-    if not final.exists():
+    if not final.exists() and not final.is_symlink():
         os.rename(staging, final)
     elif exchange(staging, final):
-        shutil.rmtree(staging)  # it now holds the old version
+        _remove(staging)  # it now holds the old version
     else:
         old = final.with_name(f".{final.name}.old")
         os.rename(final, old)
         os.rename(staging, final)
-        shutil.rmtree(old)
+        _remove(old)
     fsync_folder(final.parent)
+
+
+def _remove(folder: Path, *, ignore_errors: bool = False) -> None:
+    """Remove an old version: a folder with what it holds; a link, only the link (never the folder it points to)."""
+    if folder.is_symlink():
+        with contextlib.suppress(OSError) if ignore_errors else contextlib.nullcontext():
+            folder.unlink()
+    else:
+        shutil.rmtree(folder, ignore_errors=ignore_errors)
 
 
 @contextlib.contextmanager
