@@ -647,3 +647,54 @@ def test_the_guard_tables_from_small_evidence(tmp_path: Path) -> None:
     ]
     assert guard_shoves("none", tmp_path).startswith("Not yet measured:")
     assert guard_pushes("none", tmp_path).startswith("Not yet measured:")
+
+
+def _bench_arm(magnitude: float, successes: dict[str, int], samples: int, *, catches: dict[str, int] | None) -> dict:
+    """A ``gaitlib benchmark`` result of one net-lookahead group (``catches``: the guard's, by caught pair)."""
+    group = {"strategy": "net-lookahead", "magnitude_n": magnitude, "cells": {
+        pair: {"samples": samples, "successes": s, "touched": 0} for pair, s in successes.items()}}
+    if catches is not None:
+        group["guard"] = {"catches": sum(catches.values()), "by_pair": catches, "back_after_s_median": 0.5}
+    return {"settings": {"samples": samples, "seed": 0, "falls": "trunk"}, "groups": {"g": group}}
+
+
+def test_the_guard_pairs_table_from_small_evidence(tmp_path: Path) -> None:
+    """Every pair unguarded beside guarded at each stored magnitude, bold at its goal, pooled over the shipped gaits'
+    pairs and over all, each magnitude's pooled goal and the pairs the guard made worse named."""
+    from benchmarks.results.guard import guard_pairs
+
+    zero = {"pace-trot": 1000, "trot-pace": 990, "pace-trot_in_place": 1000}
+    _store(tmp_path, "bench-0n-unguarded-t", _bench_arm(0.0, zero, 1000, catches=None))
+    _store(tmp_path, "bench-0n-guarded-t", _bench_arm(0.0, zero | {"trot-pace": 970}, 1000,
+                                                      catches={"pace-trot": 3, "walk-bound": 5}))
+    pushed = {"pace-trot": 390, "trot-pace": 370, "pace-trot_in_place": 400}
+    _store(tmp_path, "bench-50n-unguarded-t", _bench_arm(50.0, pushed, 400, catches=None))
+    _store(tmp_path, "bench-50n-guarded-t", _bench_arm(50.0, pushed | {"trot-pace": 385}, 400, catches={}))
+    lines = guard_pairs("t", tmp_path).splitlines()
+    assert lines[0] == "| pair | 0 N, unguarded | 0 N, guarded | 50 N, unguarded | 50 N, guarded |"
+    assert lines[2:8] == [
+        "| pace → trot | **100.0** [99.6, 100.0] | **100.0** [99.6, 100.0] | **97.5** [95.5, 98.6] "
+        "| **97.5** [95.5, 98.6] |",
+        "| pace → trot_in_place | **100.0** [99.6, 100.0] | **100.0** [99.6, 100.0] | **100.0** [99.0, 100.0] "
+        "| **100.0** [99.0, 100.0] |",
+        "| trot → pace | 99.0 [98.2, 99.5] | 97.0 [95.7, 97.9] | 92.5 [89.5, 94.7] | **96.3** [93.9, 97.7] |",
+        "| the 2 pairs of the six shipped gaits | 99.5 [99.1, 99.7] | 98.5 [97.9, 98.9] | 95.0 [93.3, 96.3] "
+        "| 96.9 [95.4, 97.9] |",
+        "| all 3 pairs | 99.7 [99.4, 99.8] | 99.0 [98.6, 99.3] | 96.7 [95.5, 97.5] | 97.9 [96.9, 98.6] |",
+        "| pairs at the goal | 2 of 3 | 2 of 3 | 2 of 3 | 3 of 3 |",
+    ]
+    assert lines[9] == ("- 0 N: 30 falls in 3,000 switches guarded (300.0 per 30,000, short of the goal of 15); pairs "
+                        "guarded below their unguarded interval: trot → pace; 8 catches (walk → bound 5, pace → trot "
+                        "3).")
+    assert lines[10] == ("- 50 N: 97.9% pooled guarded, within the goal of 97.0%; pairs guarded below their unguarded "
+                         "interval: none; 0 catches.")
+    assert guard_pairs("none", tmp_path).startswith("Not yet measured:")
+    assert guard_pairs("t", tmp_path, robot="menagerie").startswith("Not yet measured:")
+    _store(tmp_path, "bench-menagerie-0n-unguarded-t", _bench_arm(0.0, zero, 1000, catches=None))
+    _store(tmp_path, "bench-menagerie-0n-guarded-t", _bench_arm(0.0, zero | {"trot-pace": 970}, 1000, catches={}))
+    lines = guard_pairs("t", tmp_path, robot="menagerie").splitlines()
+    assert lines[0] == "| pair | 0 N, unguarded | 0 N, guarded |"
+    assert lines[4] == "| trot → pace | **99.0** [98.2, 99.5] | **97.0** [95.7, 97.9] |"  # the goal there: 97%
+    assert lines[9] == ("- 0 N: 99.0% pooled guarded, within the goal of 99.0%; pairs guarded below their unguarded "
+                        "interval: trot → pace; 0 catches.")
+    assert lines[11].startswith("On MuJoCo Menagerie's A1, each cell 1,000 transitions at 0 N, seed 0 both ways")

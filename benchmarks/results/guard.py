@@ -6,17 +6,60 @@ random pushes, from the evaluations stored in ``docs/results/guard`` (``gaitlib 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
-from benchmarks.results.evidence import GAITS, ROOT, interval, not_yet, pct, read_evidence, shown
+from benchmarks.results.evidence import (
+    GAITS,
+    ROOT,
+    arrow,
+    groups_at,
+    interval,
+    not_yet,
+    pct,
+    pooled,
+    reached,
+    read_evidence,
+    shown,
+    success,
+)
+from benchmarks.results.switches import SWITCH_GOALS
 from gaitlib.stats import wilson_interval
 
-__all__ = ["GOALS", "GUARD", "guard_pushes", "guard_shoves"]
+__all__ = ["GOALS", "GUARD", "PAIR_TABLES", "PairTable", "guard_pairs", "guard_pushes", "guard_shoves"]
 
 GUARD = ROOT / "docs" / "results" / "guard"
 """The guard's stored evaluations."""
 GOALS = {12.0: 0.01, 18.0: 0.10, 50.0: 0.01}
 """The guard's goals: the share of episodes a gait may fall in, guarded, after a shove of 12 and of 18 N s and under
 random pushes of up to 50 N; a guarded figure within its goal is bold."""
+class PairTable(NamedTuple):
+    """The guard's pairs on one robot: its evidence files' prefix and the goals its table counts against."""
+
+    prefix: str
+    """The files are ``PREFIX-MAGNITUDEn-ARM-TAG.json``."""
+    robot: str
+    """The robot as the table names it."""
+    pair_goals: dict[float, float]
+    """Magnitude (N) -> the success every pair should reach, bold where it does."""
+    pooled_goals: dict[float, float]
+    """Magnitude (N) -> the pooled success the guard's goals ask for."""
+    falls_per: int | None = None
+    """Where given, the pooled goal at 0 N is read as falls in this many switches (the goal's own words)."""
+
+
+def _goal(name: str, magnitude: float) -> float:
+    return next(g.goal for g in SWITCH_GOALS if (g.name, g.strategy, g.magnitude) == (name, "net-lookahead", magnitude))
+
+
+PAIR_TABLES = {
+    "sim": PairTable("bench", "gaitlib's A1", {0.0: _goal("bench-0n", 0.0), 50.0: _goal("bench-50n", 50.0)},
+                     {0.0: 1 - 15 / 30_000, 50.0: 0.97}, falls_per=30_000),
+    "menagerie": PairTable("bench-menagerie", "MuJoCo Menagerie's A1", {0.0: _goal("bench-menagerie-0n", 0.0)},
+                           {0.0: 0.99, 50.0: 0.95}),
+}
+"""The guard's pair tables: on gaitlib's A1, every pair at the recipe's goals (99.5% at 0 N, 95% at 50 N) and
+pooled at most 15 falls in 30,000 switches at 0 N, 97% at 50 N; on Menagerie's A1, every pair at the recipe's goal
+there (97% at 0 N) and pooled 99% at 0 N, 95% at 50 N."""
 
 
 def _gaits(folder: Path, pattern: str) -> list[str]:
@@ -101,3 +144,77 @@ def guard_pushes(tag: str, folder: Path = GUARD) -> str:
         "Episodes of 20 s under the paper's random pushes of up to 50 N, and of 60 s unpushed (where every catch is a "
         "false one, the guard's cost), the same draws both ways (seed 0); bold where within the goal of 1%. "
         f"Evidence: `{shown(Path(folder))}/push50-GAIT-{tag}.json` and `GAIT-0n-{tag}.json`, each with its command."])
+
+
+def _bench(folder: Path, prefix: str, magnitude: float, arm: str, tag: str) -> tuple[Path, dict | None]:
+    path = Path(folder) / f"{prefix}-{magnitude:g}n-{arm}-{tag}.json"
+    return path, read_evidence(path)
+
+
+def _worse(guarded: dict, unguarded: dict) -> bool:
+    """Whether a pair's guarded success lies below the unguarded one's Wilson 95% interval."""
+    low, _ = wilson_interval(unguarded["successes"], unguarded["samples"])
+    return guarded["successes"] / guarded["samples"] < low
+
+
+def guard_pairs(tag: str, folder: Path = GUARD, *, robot: str = "sim") -> str:
+    """Every ordered pair switched by ``net-lookahead`` on ``robot`` (a key of :data:`PAIR_TABLES`) at each stored
+    magnitude, unguarded and guarded with one seed (``PREFIX-MAGNITUDEn-ARM-TAG.json``), the pooled rates over the six
+    shipped gaits' pairs and over all, the pairs at the goal, and the guard's catches."""
+    table = PAIR_TABLES[robot]
+    stored = {}
+    for magnitude in table.pooled_goals:
+        found = {arm: _bench(folder, table.prefix, magnitude, arm, tag) for arm in ("unguarded", "guarded")}
+        if all(evidence is not None for _, evidence in found.values()):
+            stored[magnitude] = {arm: (path, evidence) for arm, (path, evidence) in found.items()}
+    if not stored:
+        return not_yet(Path(folder) / f"{table.prefix}-0n-guarded-{tag}.json")
+    cells = {(m, arm): groups_at(evidence["result"], m)["net-lookahead"]
+             for m, arms in stored.items() for arm, (_, evidence) in arms.items()}
+    pairs = sorted({p for c in cells.values() for p in c}, key=lambda p: p.split("-"))
+    shipped = [p for p in pairs if all(g in GAITS for g in p.split("-"))]
+    columns = [(m, arm) for m in stored for arm in ("unguarded", "guarded")]
+    head = " | ".join(f"{m:g} N, {arm}" for m, arm in columns)
+    lines = [f"| pair | {head} |", "|---|" + "---|" * len(columns)]
+    for pair in pairs:
+        lines.append(f"| {arrow(pair)} | " + " | ".join(
+            success(cells[key][pair]["successes"], cells[key][pair]["samples"], goal=table.pair_goals.get(key[0]))
+            for key in columns) + " |")
+    groups = [(f"the {len(shipped)} pairs of the six shipped gaits", shipped), (f"all {len(pairs)} pairs", pairs)]
+    for name, chosen in (groups if len(shipped) < len(pairs) else groups[1:]):
+        counts = [pooled(cells[key][p] for p in chosen) for key in columns]
+        lines.append(f"| {name} | " + " | ".join(success(s, n) for s, n, _ in counts) + " |")
+    lines.append("| pairs at the goal | " + " | ".join(
+        f"{reached(cells[key].values(), table.pair_goals[key[0]])} of {len(pairs)}"
+        if key[0] in table.pair_goals else "-" for key in columns) + " |")
+    notes = [_pair_note(m, cells[(m, "guarded")], cells[(m, "unguarded")], arms["guarded"][1]["result"], pairs,
+                        table=table) for m, arms in stored.items()]
+    sizes = ", ".join(f"{arms['guarded'][1]['result']['settings']['samples']:,} transitions at {m:g} N"
+                      for m, arms in stored.items())
+    settings = next(iter(stored.values()))["guarded"][1]["result"]["settings"]
+    paths = [path for arms in stored.values() for path, _ in arms.values()]
+    goals = ", ".join(f"{pct(goal)}% at {m:g} N" for m, goal in table.pair_goals.items())
+    return "\n".join([*lines, "", *notes, "",
+                      f"On {table.robot}, each cell {sizes}, seed {settings['seed']} both ways (the draws part where a "
+                      "trial ends differently: a world draws its next trial when the last one ends); falls by the "
+                      f"`{settings['falls']}` definition; bold where the pair reaches its goal ({goals}). Evidence: "
+                      + ", ".join(f"`{shown(p)}`" for p in paths) + ", each with its command."])
+
+
+def _pair_note(magnitude: float, guarded: dict, unguarded: dict, result: dict, pairs: list[str], *,
+               table: PairTable) -> str:
+    """One magnitude's verdict: the pooled goal, the pairs the guard made worse, its catches by caught pair."""
+    s, n, _ = pooled(guarded.values())
+    goal = table.pooled_goals[magnitude]
+    within = "within" if s >= goal * n else "short of"
+    if magnitude == 0 and table.falls_per:
+        allowed = round((1 - goal) * table.falls_per)
+        verdict = (f"{n - s} falls in {n:,} switches guarded ({(n - s) * table.falls_per / n:.1f} per "
+                   f"{table.falls_per:,}, {within} the goal of {allowed})")
+    else:
+        verdict = f"{pct(s / n)}% pooled guarded, {within} the goal of {pct(goal)}%"
+    worse = [arrow(p) for p in pairs if _worse(guarded[p], unguarded[p])]
+    catch = next(g for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude)["guard"]
+    caught = ", ".join(f"{arrow(k)} {v}" for k, v in sorted(catch["by_pair"].items(), key=lambda kv: (-kv[1], kv[0])))
+    return (f"- {magnitude:g} N: {verdict}; pairs guarded below their unguarded interval: "
+            f"{', '.join(worse) if worse else 'none'}; {catch['catches']:,} catches{f' ({caught})' if caught else ''}.")
