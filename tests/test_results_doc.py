@@ -683,11 +683,11 @@ def test_the_guard_pairs_table_from_small_evidence(tmp_path: Path) -> None:
         "| all 3 pairs | 99.7 [99.4, 99.8] | 99.0 [98.6, 99.3] | 96.7 [95.5, 97.5] | 97.9 [96.9, 98.6] |",
         "| pairs at the goal | 2 of 3 | 2 of 3 | 2 of 3 | 3 of 3 |",
     ]
-    assert lines[9] == ("- 0 N: 30 falls in 3,000 switches guarded (300.0 per 30,000, short of the goal of 15); pairs "
-                        "guarded below their unguarded interval: trot → pace; 8 catches (walk → bound 5, pace → trot "
-                        "3).")
-    assert lines[10] == ("- 50 N: 97.9% pooled guarded, within the goal of 97.0%; pairs guarded below their unguarded "
-                         "interval: none; 0 catches.")
+    assert lines[9] == ("- 0 N: 30 falls in 3,000 switches guarded (300.0 per 30,000, short of the goal of 15; "
+                        "unguarded 10, 100.0 per 30,000); pairs guarded below their unguarded interval: trot → pace; 8 "
+                        "catches (walk → bound 5, pace → trot 3).")
+    assert lines[10] == ("- 50 N: 97.9% pooled guarded, within the goal of 97.0% (unguarded 96.7%); pairs guarded "
+                         "below their unguarded interval: none; 0 catches.")
     assert guard_pairs("none", tmp_path).startswith("Not yet measured:")
     assert guard_pairs("t", tmp_path, robot="menagerie").startswith("Not yet measured:")
     _store(tmp_path, "bench-menagerie-0n-unguarded-t", _bench_arm(0.0, zero, 1000, catches=None))
@@ -695,6 +695,6 @@ def test_the_guard_pairs_table_from_small_evidence(tmp_path: Path) -> None:
     lines = guard_pairs("t", tmp_path, robot="menagerie").splitlines()
     assert lines[0] == "| pair | 0 N, unguarded | 0 N, guarded |"
     assert lines[4] == "| trot → pace | **99.0** [98.2, 99.5] | **97.0** [95.7, 97.9] |"  # the goal there: 97%
-    assert lines[9] == ("- 0 N: 99.0% pooled guarded, within the goal of 99.0%; pairs guarded below their unguarded "
-                        "interval: trot → pace; 0 catches.")
+    assert lines[9] == ("- 0 N: 99.0% pooled guarded, within the goal of 99.0% (unguarded 99.7%); pairs guarded "
+                        "below their unguarded interval: trot → pace; 0 catches.")
     assert lines[11].startswith("On MuJoCo Menagerie's A1, each cell 1,000 transitions at 0 N, seed 0 both ways")

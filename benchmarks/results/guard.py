@@ -205,14 +205,15 @@ def _pair_note(magnitude: float, guarded: dict, unguarded: dict, result: dict, p
                table: PairTable) -> str:
     """One magnitude's verdict: the pooled goal, the pairs the guard made worse, its catches by caught pair."""
     s, n, _ = pooled(guarded.values())
+    s0, n0, _ = pooled(unguarded.values())
     goal = table.pooled_goals[magnitude]
     within = "within" if s >= goal * n else "short of"
     if magnitude == 0 and table.falls_per:
-        allowed = round((1 - goal) * table.falls_per)
-        verdict = (f"{n - s} falls in {n:,} switches guarded ({(n - s) * table.falls_per / n:.1f} per "
-                   f"{table.falls_per:,}, {within} the goal of {allowed})")
+        per = table.falls_per
+        verdict = (f"{n - s} falls in {n:,} switches guarded ({(n - s) * per / n:.1f} per {per:,}, {within} the goal "
+                   f"of {round((1 - goal) * per)}; unguarded {n0 - s0}, {(n0 - s0) * per / n0:.1f} per {per:,})")
     else:
-        verdict = f"{pct(s / n)}% pooled guarded, {within} the goal of {pct(goal)}%"
+        verdict = (f"{pct(s / n)}% pooled guarded, {within} the goal of {pct(goal)}% (unguarded {pct(s0 / n0)}%)")
     worse = [arrow(p) for p in pairs if _worse(guarded[p], unguarded[p])]
     catch = next(g for g in result["groups"].values() if float(g["magnitude_n"]) == magnitude)["guard"]
     caught = ", ".join(f"{arrow(k)} {v}" for k, v in sorted(catch["by_pair"].items(), key=lambda kv: (-kv[1], kv[0])))
