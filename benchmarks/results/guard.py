@@ -166,7 +166,7 @@ def guard_pairs(tag: str, folder: Path = GUARD, *, robot: str = "sim") -> str:
     for magnitude in table.pooled_goals:
         found = {arm: _bench(folder, table.prefix, magnitude, arm, tag) for arm in ("unguarded", "guarded")}
         if all(evidence is not None for _, evidence in found.values()):
-            stored[magnitude] = {arm: (path, evidence) for arm, (path, evidence) in found.items()}
+            stored[magnitude] = found
     if not stored:
         return not_yet(Path(folder) / f"{table.prefix}-0n-guarded-{tag}.json")
     cells = {(m, arm): groups_at(evidence["result"], m)["net-lookahead"]
