@@ -27,13 +27,24 @@ BACKENDS = [
 ]
 
 LONGEST_FILES = (
-    "test_cluster.py", "test_user_library.py", "test_full_disk.py", "test_gpu_check.py", "test_cli_transitions.py",
-    "test_cli_train.py", "test_library.py", "test_distributed.py", "test_writers.py", "test_byte_flips.py",
-    "test_transition_crash_safety.py", "test_cli_switching.py",
+    "test_user_library.py", "test_cluster.py", "test_distributed.py", "test_writers.py", "test_cli_train.py",
+    "test_full_disk.py", "test_guard.py", "test_recipe.py", "test_cli_switching.py", "test_byte_flips.py",
+    "test_transition_crash_safety.py", "test_cli_transitions.py", "test_routes.py", "test_data_identity.py",
+    "test_packaging.py", "test_refusals.py", "test_drive.py",
 )
-"""The test files that take longest (``pytest --durations=0``), run first: pytest-xdist hands whole files to its
-workers (``--dist loadfile``) in collection order, so a long file collected last keeps one core busy while the other
-idles."""
+"""The test files that take longest (``pytest --durations=0``), longest first, run after the Newton files: pytest-xdist
+hands out whole units of work in collection order (``--no-loadscope-reorder``; by default it would order them by their
+number of tests), so a long file collected last keeps one core busy while the other idles."""
+
+NEWTON_FILES = (
+    "tests/test_cli_throughput.py", "tests/test_gpu_check.py", "tests/test_meta.py", "tests/test_sim_backends.py",
+    "tests/test_sim_parity.py",
+)
+"""The files with a test that runs the newton backend, in the test process or in a child. They are one unit of work
+for pytest-xdist (:func:`pytest_xdist_make_scheduler`): one worker runs them one after another, so that Newton is
+imported once (Warp parses every kernel's source at import: about 10 s on this CPU) and, with an empty kernel cache,
+each kernel is compiled once (about 70 s on one core), not by both workers at the same time. A test of newton in a
+file not listed here fails the run (:func:`pytest_collection_modifyitems`)."""
 
 
 def _runs_newton(item: pytest.Item) -> bool:
@@ -43,12 +54,31 @@ def _runs_newton(item: pytest.Item) -> bool:
     )
 
 
+def _file(nodeid: str) -> str:
+    return nodeid.split("::")[0]
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The files with tests that run the newton backend first (Warp compiles its kernels on first use: about a
-    minute and a quarter on a 2-core machine with an empty cache), then the longest files (:data:`LONGEST_FILES`),
-    the rest in their usual order."""
+    """The Newton files first (:data:`NEWTON_FILES`), then the longest files (:data:`LONGEST_FILES`), the rest in
+    their usual order."""
+    unlisted = sorted({_file(item.nodeid) for item in items if _runs_newton(item)} - set(NEWTON_FILES))
+    if unlisted:
+        raise pytest.UsageError(f"tests/conftest.py: add {', '.join(unlisted)} to NEWTON_FILES (it runs newton)")
     rank = {name: i + 1 for i, name in enumerate(LONGEST_FILES)}
-    items.sort(key=lambda item: 0 if _runs_newton(item) else rank.get(item.path.name, len(rank) + 1))
+    items.sort(key=lambda item: 0 if _file(item.nodeid) in NEWTON_FILES else rank.get(item.path.name, len(rank) + 1))
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """pytest-xdist's ``--dist loadfile``, whole files to a worker in collection order, but with the Newton files one
+    unit together. (Its own ``--dist loadgroup`` marks do not group under pytest 9: they rename node ids, which pytest
+    9 no longer reads.)"""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FilesAndNewton(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "newton" if _file(nodeid) in NEWTON_FILES else _file(nodeid)
+
+    return FilesAndNewton(config, log)
 
 
 @pytest.fixture(params=BACKENDS)

@@ -14,7 +14,7 @@ from gaitlib.library import Library
 from gaitlib.strategies.fitting import evaluate_library
 from gaitlib.transitions import read_all, validate
 
-QUICK = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco"]
+QUICK = ["--worlds", "16", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco"]  # a sample a world
 
 
 @pytest.fixture

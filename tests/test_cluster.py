@@ -27,10 +27,10 @@ from gaitlib.meta import TrialProtocol, load_switching
 from gaitlib.transitions import read, validate
 
 SMALL = CollectConfig(
-    samples=64, num_worlds=4, push_max=400.0, backend="mujoco", chunk=8,
+    samples=32, num_worlds=4, push_max=400.0, backend="mujoco", chunk=4,
     protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.4),
 )
-"""Eight chunks of eight samples on four worlds, short cycles, strong pushes (both labels). Eight, so that chunks
+"""Eight chunks of four samples on four worlds, short cycles, strong pushes (both labels). Eight, so that chunks
 are still to be sent when a worker is killed after the first commit: the dead one is then handed one (and replaced)
 even where its last chunk had finished before the kill, which with five chunks the live worker could all take."""
 
@@ -39,7 +39,7 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     # Run first, before this process starts its own Ray: the command starts a local Ray for the run and stops it.
     # In this process, saving a fresh interpreter's imports (``collect`` runs in a fresh one in test_cli_transitions).
     lib, data = str(tiny_library.root), str(tmp_path / "ray.h5")
-    quick = ["--worlds", "4", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8",
+    quick = ["--worlds", "8", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8",
              "--seed", "0"]  # the same seed for both runs (without it, each collection draws its own)
     ran = gaitlib_quick("collect", "--samples", "16", "--out", data, "--library", lib, *quick, "--ray",
                         "--workers", "2")
@@ -98,7 +98,7 @@ def test_a_killed_worker_loses_no_committed_sample(local_ray, tiny_library, plai
 
     result = collect(path, library=tiny_library, gaits=GAITS, config=SMALL, progress=kill_a_worker,
                      cluster=ClusterConfig(workers=2))
-    assert result.samples == result.written == 64 and [s for s, _, _ in seen] == list(range(8, 65, 8))
+    assert result.samples == result.written == 32 and [s for s, _, _ in seen] == list(range(4, 33, 4))
     for count, committed, _ in seen:  # every commit kept every sample committed before it, bit for bit
         assert_same(read(path).samples.select(slice(0, count)), committed)
     data = read(path)
@@ -140,5 +140,5 @@ def test_workers_that_keep_dying_end_the_run_in_one_line(local_ray, tiny_library
         collect(tmp_path / "t.h5", library=tiny_library, gaits=GAITS, config=SMALL, progress=kill_every_worker,
                 cluster=cluster)
     assert "\n" not in str(caught.value)
-    assert validate(tmp_path / "t.h5").count in (8, 16)  # what was committed stays
+    assert validate(tmp_path / "t.h5").count in (4, 8)  # what was committed stays
     assert np.all(read(tmp_path / "t.h5").samples.chunk < 2)

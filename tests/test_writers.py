@@ -58,7 +58,7 @@ def test_fit_writes_into_your_own_library_by_default_and_leaves_the_shipped_one_
     before = tree_sha256(SHIPPED)
     data = own_cwd / "t.h5"
     collected = gaitlib_quick("collect", "--library", str(SHIPPED), "--pairs", "trot-stand,stand-trot", "--samples",
-                              "32", "--worlds", "16", "--horizon", "1.0", "--push-max", "1500", "--backend", "mujoco",
+                              "32", "--worlds", "32", "--horizon", "1.0", "--push-max", "1500", "--backend", "mujoco",
                               "--out", str(data))
     assert collected.returncode == 0, collected.stderr
     fitted = gaitlib_quick("fit", "--data", str(data), "--epochs", "1", "--min-per-label", "0")

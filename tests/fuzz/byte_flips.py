@@ -82,7 +82,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
                                 run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=1, eval_seconds=0.3))
     data = root / "t.h5"
     collect_config = CollectConfig(
-        samples=24, num_worlds=4, push_max=400.0, backend="mujoco", chunk=24,
+        samples=24, num_worlds=12, push_max=400.0, backend="mujoco", chunk=24,
         protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.3))
     collect(data, library=Library(library), config=collect_config)
     fit_library(Library(library), read(data), sources=[data], epochs=2, min_per_label=0)  # too few to validate
