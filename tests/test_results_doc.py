@@ -18,6 +18,7 @@ from benchmarks.results import doc as tables
 from benchmarks.results import robustness
 from benchmarks.results import switches as switching
 from benchmarks.results.evidence import pct
+from gaitlib.atomic import CHECKSUM_KEY, json_checksum
 from gaitlib.defaults import Falls
 from gaitlib.stats import wilson_interval
 from gaitlib.strategies.fitting import PAPER_PAIRS
@@ -112,6 +113,21 @@ def test_every_page_is_what_the_stored_evidence_makes() -> None:
     made = tables.render_tables()
     assert {doc.name: tables.check_doc(doc, tables=made) for doc in tables.DOCS} == dict.fromkeys(
         (doc.name for doc in tables.DOCS), None), "python -m benchmarks.results rewrites them"
+
+
+def test_every_stored_result_with_a_checksum_matches_it() -> None:
+    """A result gaitlib wrote carries the checksum of its content; an edit of the stored copy (such as naming the
+    robot model by its repository path) is followed by a new checksum, so a reader that checks it accepts the file."""
+    results = []
+    for path in sorted((ROOT / "docs" / "results").rglob("*.json")):
+        stored = json.loads(path.read_text())
+        found = stored.get("result") if isinstance(stored, dict) else None
+        results += [(path, r) for r in (found if isinstance(found, list) else [found])
+                    if isinstance(r, dict) and CHECKSUM_KEY in r]
+    assert len(results) >= 20
+    stale = [str(path) for path, result in results
+             if result[CHECKSUM_KEY] != json_checksum({k: v for k, v in result.items() if k != CHECKSUM_KEY})]
+    assert stale == []
 
 
 def test_a_figure_changed_by_hand_is_caught(tmp_path: Path) -> None:
