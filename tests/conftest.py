@@ -68,6 +68,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=lambda item: 0 if _file(item.nodeid) in NEWTON_FILES else rank.get(item.path.name, len(rank) + 1))
 
 
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist: unknown when it is not loaded
 def pytest_xdist_make_scheduler(config: pytest.Config, log):
     """pytest-xdist's ``--dist loadfile``, whole files to a worker in collection order, but with the Newton files one
     unit together. (Its own ``--dist loadgroup`` marks do not group under pytest 9: they rename node ids, which pytest
