@@ -14,7 +14,7 @@ def test_train_then_eval_json(tmp_path) -> None:
     library, runs = tmp_path / "library", str(tmp_path / "runs")
     trained = gaitlib_quick(  # in this process: the training runs in a fresh one in the Ctrl-C test below
         "train", "stand", "--preset", "tiny", "--iterations", "2", "--seed", "3", "--eval-episodes", "2",
-        "--library", str(library), "--run-dir", runs,
+        "--eval-seconds", "2", "--library", str(library), "--run-dir", runs,
     )
     assert trained.returncode == 0, trained.stderr
     assert "after 2 iterations, 64 samples" in trained.stderr and "falls 0.000 (trunk), touches" in trained.stderr
@@ -22,13 +22,14 @@ def test_train_then_eval_json(tmp_path) -> None:
     meta = json.loads((library / "stand" / "metadata.json").read_text())
     assert meta["training"]["preset"]["name"] == "tiny" and meta["training"]["iterations"] == 2
     assert [row[0] for row in meta["training"]["curve"]["rows"]] == [1, 2]
-    # The training evaluation (2 episodes x 20 s, seed + 1) is reproduced exactly by the saved policy in a new
+    # The training evaluation (2 episodes x 2 s, seed + 1) is reproduced exactly by the saved policy in a new
     # process: the entry holds the trained weights and normalizer, and evaluation depends on its seed alone.
-    evaluated = gaitlib("eval", "stand", "--library", str(library), "--episodes", "2", "--seed", "4", "--json")
+    evaluated = gaitlib("eval", "stand", "--library", str(library), "--episodes", "2", "--seconds", "2", "--seed", "4",
+                        "--json")
     assert evaluated.returncode == 0, evaluated.stderr
     report = json.loads(evaluated.stdout)
     assert report == {"gait": "stand"} | meta["evaluation"]
-    assert report["episodes"] == 2 and report["seconds"] == 20.0 and math.isfinite(report["joint_rmse"])
+    assert report["episodes"] == 2 and report["seconds"] == 2.0 and math.isfinite(report["joint_rmse"])
 
 
 def test_unknown_gait_is_one_error_line(tmp_path) -> None:
@@ -61,7 +62,7 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
 
     library, runs = tmp_path / "library", tmp_path / "runs"
     args = ["train", "stand", "--preset", "tiny", "--iterations", "100000", "--checkpoint-every", "1",
-            "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs)]
+            "--eval-episodes", "2", "--eval-seconds", "0.5", "--library", str(library), "--run-dir", str(runs)]
     process = subprocess.Popen(
         [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
         stdout=subprocess.PIPE,
@@ -83,6 +84,7 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_continues(tmp_path) -> None:
     done = saved["iter"]
     assert done >= 1 and saved["infos"]["samples"] == done * 32 and not (library / "stand").exists()
     resumed = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", str(done + 1), "--resume",
-                            "--eval-episodes", "2", "--library", str(library), "--run-dir", str(runs))
+                            "--eval-episodes", "2", "--eval-seconds", "0.5", "--library", str(library), "--run-dir",
+                            str(runs))
     assert resumed.returncode == 0, resumed.stderr
     assert f"after {done + 1} iterations, {(done + 1) * 32:,} samples" in resumed.stderr

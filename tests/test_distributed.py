@@ -12,7 +12,8 @@ from cli_runner import gaitlib_quick
 
 from gaitlib.library import Library
 
-TRAIN = ("train", "stand", "--preset", "tiny", "--backend", "mujoco", "--seed", "5", "--eval-episodes", "2")
+TRAIN = ("train", "stand", "--preset", "tiny", "--backend", "mujoco", "--seed", "5", "--eval-episodes", "2",
+         "--eval-seconds", "0.5")
 
 
 def _torchrun(tmp_path, *args: str) -> subprocess.CompletedProcess[str]:

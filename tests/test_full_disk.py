@@ -106,8 +106,8 @@ def test_training_that_cannot_publish_on_a_full_disk_says_so_in_one_line_and_kee
     done = on_a_small_disk(tmp_path, f"""
 mkdir "$DISK/library"
 fill_but 8
-eval "$CLI" train stand --preset tiny --iterations 1 --eval-episodes 2 --backend mujoco --library "$DISK/library" \\
-    --run-dir {run_dir}
+eval "$CLI" train stand --preset tiny --iterations 1 --eval-episodes 2 --eval-seconds 0.5 --backend mujoco \\
+    --library "$DISK/library" --run-dir {run_dir}
 echo "status $?"
 """)
     assert "status 1" in done.stdout, done.stderr

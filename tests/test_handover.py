@@ -146,8 +146,8 @@ def test_the_commands_record_states_and_train_from_them(tiny_library, tmp_path) 
     assert recorded.returncode == 0, recorded.stderr
     assert f"{out}: 8 handover states of stand, trot" in recorded.stderr
     trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "1",
-                            "--states", str(out), "--library", str(tmp_path / "lib"), "--run-dir", str(tmp_path / "r"),
-                            "--backend", "mujoco")
+                            "--eval-seconds", "0.5", "--states", str(out), "--library", str(tmp_path / "lib"),
+                            "--run-dir", str(tmp_path / "r"), "--backend", "mujoco")
     assert trained.returncode == 0, trained.stderr
     meta = json.loads((tmp_path / "lib" / "stand" / "metadata.json").read_text())
     assert meta["training"]["switch_start"]["share"] == 0.4  # the default with --states

@@ -143,10 +143,10 @@ def test_cycle_sync_forgives_a_displacement_at_the_next_cycle_and_only_then() ->
 def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
     library = tmp_path / "library"
     trained = gaitlib_quick(
-        "train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--backend", "mujoco",
-        "--library", str(library), "--run-dir", str(tmp_path / "runs"), "--push-kind", "kick", "--kick-max", "0.5",
-        "--kick-interval", "1:2", "--terminate", "trunk", "--contact-penalty", "0.2", "--gamma", "0.99",
-        "--lam", "0.9", "--action-delay", "1", "--critic-delay", "--cycle-sync",
+        "train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--eval-seconds", "0.5",
+        "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"), "--push-kind", "kick",
+        "--kick-max", "0.5", "--kick-interval", "1:2", "--terminate", "trunk", "--contact-penalty", "0.2",
+        "--gamma", "0.99", "--lam", "0.9", "--action-delay", "1", "--critic-delay", "--cycle-sync",
     )
     assert trained.returncode == 0, trained.stderr
     training = json.loads((library / "stand" / "metadata.json").read_text())["training"]
@@ -173,7 +173,8 @@ def test_the_defaults_are_the_shipped_librarys_recipe(tmp_path) -> None:
         Recipe()}
     library = tmp_path / "library"
     trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",
-                            "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"))
+                            "--eval-seconds", "0.5", "--backend", "mujoco", "--library", str(library),
+                            "--run-dir", str(tmp_path / "runs"))
     assert trained.returncode == 0, trained.stderr
     recorded = json.loads((library / "stand" / "metadata.json").read_text())["training"]["recipe"]
     assert Recipe.from_record(recorded) == Recipe() and Recipe() != PAPER_RECIPE
@@ -226,7 +227,7 @@ def test_an_ablation_row_measures_a_fixed_delay_variant_at_its_trained_delay(tmp
     library = tmp_path / "library"
     trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",
                             "--backend", "mujoco", "--library", str(library), "--run-dir", str(tmp_path / "runs"),
-                            "--action-delay", "1")
+                            "--action-delay", "1", "--eval-seconds", "0.5")
     assert trained.returncode == 0, trained.stderr
     states = tmp_path / "s.npz"
     recorded = gaitlib_quick("states", "--gaits", "trot", "--per-gait", "8", "--worlds", "8", "--backend", "mujoco",

@@ -238,7 +238,8 @@ def test_a_robot_on_a_turning_reference_earns_the_full_reward_and_no_heading_err
 
 def test_a_turning_gait_trains_in_a_short_smoke_run(tmp_path) -> None:
     run = gaitlib_quick("train", "trot_left", "--preset", "tiny", "--iterations", "2", "--eval-episodes", "1",
-                        "--backend", "mujoco", "--library", str(tmp_path / "lib"), "--run-dir", str(tmp_path / "run"))
+                        "--eval-seconds", "0.5", "--backend", "mujoco", "--library", str(tmp_path / "lib"),
+                        "--run-dir", str(tmp_path / "run"))
     assert run.returncode == 0, run.stderr
     entry = Library(tmp_path / "lib").entry("trot_left")  # read back and checked, its deployment block included
     assert entry.description == get_gait("trot_left") and entry.clip.cycle_yaw == pytest.approx(0.25)

@@ -48,17 +48,22 @@ def run_fix(commands: list[str], library: Path) -> None:
 
 def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alone(fresh_copy) -> None:
     env = {k: v for k, v in os.environ.items() if k != "GAITLIB_LIBRARY"}
-    trained = run("train", "stand", "--iterations", "1", "--eval-episodes", "2", cwd=fresh_copy, env=env)
+    trained = run("train", "stand", "--iterations", "1", "--worlds", "64", "--eval-episodes", "2",
+                  "--eval-seconds", "1", cwd=fresh_copy, env=env)
     assert trained.returncode == 0, trained.stderr
     assert "runs/library is your own library, made now as a copy of the shipped" in trained.stderr
     stale = [line for line in trained.stderr.splitlines() if line.startswith("next: the switching models do not")]
     assert len(stale) == 1 and "drive 10 pair(s)" in stale[0]  # the stand's pairs with each of five gaits
     assert all(f"{a}-{b}" in stale[0] for g in ("bound", "pace", "pronk", "trot", "walk")
                for a, b in (("stand", g), (g, "stand")))
+    assert "the data they were fitted on are not here, so every pair is collected again" in stale[0]
+    assert f"--pairs {','.join(ordered_pairs(('bound', 'pace', 'pronk', 'stand', 'trot', 'walk')))} " in stale[0]
     assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
     mine = Library(fresh_copy / "runs" / "library")
     assert mine.gaits() == Library(fresh_copy / "library").gaits() and len(mine.gaits()) == 6
-    assert mine.entry("stand").metadata["training"]["iterations"] == 1
+    training = mine.entry("stand").metadata["training"]
+    assert training["iterations"] == 1 and training["preset"]["name"] == "cpu" and training["preset"]["num_envs"] == 64
+    assert mine.entry("stand").metadata["evaluation"]["seconds"] == 1.0
     shipped = Library(fresh_copy / "library")
     assert mine.entry("trot").identity == shipped.entry("trot").identity
     assert mine.entry("stand").identity != shipped.entry("stand").identity
@@ -226,7 +231,8 @@ def test_a_retrained_gait_is_named_stale_with_the_commands_that_fix_it(
     assert fine["problems"] == [] and set(fine["switching"]["pairs"]) == {"stand-trot", "trot-stand"}
 
     trained = gaitlib_quick("train", "trot", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "1",
-                            "--seed", "5", "--library", str(library.root), "--run-dir", str(tmp_path / "runs"))
+                            "--eval-seconds", "0.5", "--seed", "5", "--library", str(library.root), "--run-dir",
+                            str(tmp_path / "runs"))
     assert trained.returncode == 0, trained.stderr
     assert f"replacing {library.root / 'trot'}: the switching models there were fitted on the old trot" in (
         trained.stderr

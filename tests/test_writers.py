@@ -116,7 +116,7 @@ def test_a_measurement_of_other_switching_models_is_not_resumed_or_reused(switch
 def test_a_run_folder_belongs_to_one_training_run(tmp_path) -> None:
     run_dir, library = tmp_path / "runs" / "stand", tmp_path / "library"
     args = ("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2", "--backend",
-            "mujoco", "--run-dir", str(run_dir))
+            "mujoco", "--run-dir", str(run_dir), "--eval-seconds", "0.5")
     first = gaitlib_quick(*args, "--library", str(library), "--seed", "0")
     assert first.returncode == 0, first.stderr
     entry = json.loads((library / "stand" / "metadata.json").read_text())

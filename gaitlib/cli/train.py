@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import typer
 
-from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
+from gaitlib.cli.options import COUNT, EPISODE_SECONDS, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.defaults import SWITCH_START
 
 __all__ = ["train_command"]
@@ -68,8 +69,15 @@ def train_command(
     run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
     checkpoint_every: int = bounded(50, "--checkpoint-every", help="Iterations between checkpoints;", bounds=COUNT),
+    worlds: int | None = bounded(
+        None, "--worlds", help="Parallel training worlds (default: the preset's, cpu 512, paper 4096);", bounds=WORLDS
+    ),
     eval_episodes: int = bounded(
         64, "--eval-episodes", help="Episodes of the final evaluation (one world each);", bounds=WORLDS
+    ),
+    eval_seconds: float = bounded(
+        20.0, "--eval-seconds", help="Length of each final evaluation episode (gaitlib eval's default);",
+        bounds=EPISODE_SECONDS,
     ),
     push_kind: str = typer.Option(
         "kick", "--push-kind", help="Training pushes: kick (velocity kicks, legged_gym's and mjlab's way: --kick-max, "
@@ -125,12 +133,16 @@ def train_command(
     no_effect(ctx, ("kick_max", "kick_draw", "kick_interval"), when=push_kind == "force",
               because="with --push-kind force (its pushes are forces, not kicks)")
     check_worlds("--eval-episodes", eval_episodes, backend=backend)
+    if worlds is not None:
+        check_worlds("--worlds", worlds, backend=backend)
     description = _description(gait, gait_file)
     recipe = Recipe(push_kind=push_kind, kick_max=kick_max, kick_draw=kick_draw,
                     kick_interval=_interval(kick_interval), falls=terminate, contact_penalty=contact_penalty,
                     gamma=gamma, lam=lam, action_delay=action_delay, critic_delay=critic_delay,
                     cycle_sync=cycle_sync)
     chosen = recipe.preset(get_preset(preset))
+    if worlds is not None:  # recorded with the preset in the entry, as every other size of the run
+        chosen = dataclasses.replace(chosen, num_envs=worlds)
     target, copy_from = writing_target(library)
     writable_folder("--library", target, what="a library folder")
     writable_folder("--run-dir", run_dir or Path("runs") / gait)
@@ -151,6 +163,7 @@ def train_command(
         resume=resume,
         checkpoint_every=checkpoint_every,
         eval_episodes=eval_episodes,
+        eval_seconds=eval_seconds,
         recipe=recipe,
     )
     resume_point(request)  # a checkpoint of another run, or none: one line, before the notes below

@@ -184,6 +184,8 @@ def library_status(library: Library) -> LibraryStatus:
                                 and bundle.identities[g] != current[g]})
             why = f"retrained since the fit: {', '.join(retrained)}" if retrained else "not in the fitted data"
             text = f"the switching models do not drive {len(todo)} pair(s), {', '.join(todo)} ({why})"
+            if not all(Path(d["path"]).is_file() for d in bundle.data):
+                text += "; the data they were fitted on are not here, so every pair is collected again"
             problems.append(Problem(text, _refit(root, bundle, todo, usable)))
     elif len(usable) >= 2 and not library.switching_dir.is_dir():
         problems.append(Problem("no switching models yet (transition-net, TMT)", _collect_all(root, usable)))
