@@ -84,6 +84,24 @@ def test_resume_with_another_recipe_names_the_option(started, states_files, tmp_
         _resume(started, tmp_path, states=states_files[0], switch_start=0.4, recipe=Recipe(gamma=0.95))
 
 
+def test_resume_on_other_worlds_is_refused_and_a_record_from_before_worlds_were_recorded_continues(
+    started, states_files, tmp_path
+) -> None:
+    tiny = get_preset("tiny")
+    with pytest.raises(GaitlibError, match=r"of another training run: --worlds: worlds 4 then, 8 now; "):
+        _resume(started, tmp_path, states=states_files[0], switch_start=0.4,
+                preset=dataclasses.replace(tiny, num_envs=8))
+    old = tmp_path / "old"
+    shutil.copytree(started / "runs", old / "runs")
+    latest = old / "runs" / "stand" / "checkpoints" / "latest.pt"
+    saved = torch.load(latest, weights_only=True)
+    del saved["infos"]["worlds"]  # as a checkpoint from before --worlds: every run had its preset's worlds
+    torch.save(saved, latest)
+    result = train_gait(request(old, iterations=2, resume=True, library=started / "library", states=states_files[0],
+                                switch_start=0.4))
+    assert result.iterations == 2
+
+
 def test_a_checkpoint_without_content_identity_is_refused(started, states_files, tmp_path) -> None:
     shutil.copytree(started / "runs", tmp_path / "runs")
     latest = tmp_path / "runs" / "stand" / "checkpoints" / "latest.pt"

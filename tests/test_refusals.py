@@ -55,6 +55,8 @@ PARSE_REFUSALS = [
     (["train", "stand", "--minutes", "-1"], "--minutes must be a finite number in (0, 100000] min, got -1"),
     (["train", "stand", "--eval-episodes", "0"], "--eval-episodes must be a whole number in [1, 65536], got 0"),
     (["train", "stand", "--iterations", "0"], "--iterations must be a whole number in [1, 1000000], got 0"),
+    (["train", "stand", "--worlds", "0"], "--worlds must be a whole number in [1, 65536], got 0"),
+    (["train", "stand", "--eval-seconds", "0"], "--eval-seconds must be a finite number in (0, 600] s, got 0"),
 ]
 
 

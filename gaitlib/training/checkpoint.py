@@ -22,13 +22,15 @@ from gaitlib.errors import GaitlibError
 
 __all__ = ["IDENTITY_KEYS", "check_same_run", "read_checkpoint", "run_identity", "start_over"]
 
-IDENTITY_KEYS = ("gait", "description", "states_sha256", "preset", "recipe", "switch_start", "seed", "library")
+IDENTITY_KEYS = ("gait", "description", "states_sha256", "preset", "worlds", "recipe", "switch_start", "seed",
+                 "library")
 """The run record's keys that identify the run, in the order a refusal looks for the one that differs."""
 
 _RECORD = {"gait": str, "preset": str, "samples": int, "elapsed_s": (int, float), "curve": list}
 """The run record a gaitlib checkpoint keeps in ``infos``: key -> type."""
 
-_OPTION = {"description": "--gait-file", "states_sha256": "--states", "preset": "--preset", "seed": "--seed",
+_OPTION = {"description": "--gait-file", "states_sha256": "--states", "preset": "--preset", "worlds": "--worlds",
+           "seed": "--seed",
            "switch_start": "--switch-start", "library": "--library", "gait": "GAIT"}
 """Identity key -> the option of ``gaitlib train`` that sets it (the recipe's keys name their own options)."""
 
@@ -41,6 +43,7 @@ def run_identity(request) -> dict:
         "description": _plain(request.description.record()),
         "states_sha256": None if request.states is None else file_sha256(request.states),
         "preset": request.preset.name,
+        "worlds": request.preset.num_envs,
         "recipe": request.recipe.as_dict(),
         "switch_start": request.switch_start,
         "seed": request.seed,
@@ -90,9 +93,21 @@ def check_same_run(record: Mapping, asked: Mapping, *, path: Path) -> None:
         then, now = record.get(key), asked[key]
         if key == "switch_start":
             then = record.get(key, 0.0)
+        if key == "worlds" and key not in record:  # recorded since --worlds: before it, every run had its preset's
+            then = _preset_worlds(record.get("preset"))
         if then != now:
             raise GaitlibError(f"checkpoint {path} is of another training run: {_difference(key, then, now)}; resume "
                                f"it with the inputs it was started with, or {start_over(path)}")
+
+
+def _preset_worlds(name: object) -> int | None:
+    """The worlds of the preset called ``name``, ``None`` for a name no preset has."""
+    from gaitlib.training.presets import get_preset
+
+    try:
+        return get_preset(str(name)).num_envs
+    except GaitlibError:
+        return None
 
 
 def _difference(key: str, then: object, now: object) -> str:
