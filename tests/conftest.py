@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -103,24 +106,42 @@ def make(backend_name: str):
         backend.close()
 
 
+def built_once(tmp_path_factory: pytest.TempPathFactory, name: str, build: Callable[[Path], None]) -> Path:
+    """The folder ``name`` made by ``build(folder)`` once for the whole run: under pytest-xdist the first worker to
+    ask builds it and the others wait for it and share it, as one process shares a session fixture (read-only to
+    the tests: copy it before writing)."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's folder, above each worker's own
+    folder, done = base / name, base / f"{name}.done"
+    with open(base / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)  # a build interrupted before it was done
+            build(folder)
+            done.touch()
+    return folder
+
+
 @pytest.fixture(scope="session")
 def tiny_library(tmp_path_factory) -> Library:
     """The tests' one trained library: stand and trot, one PPO iteration each with the tiny preset (real policies
-    on the real simulator, untrained in effect). Shared by every test module: copy it (:func:`copy_library`)
-    before writing into it."""
+    on the real simulator, untrained in effect). Shared by every test module (and worker): copy it
+    (:func:`copy_library`) before writing into it."""
     from gaitlib.gaits import get_gait
     from gaitlib.training import get_preset
     from gaitlib.training.trainer import TrainRequest, train_gait
 
-    root = tmp_path_factory.mktemp("tiny")
-    for gait in TINY_GAITS:
-        train_gait(
-            TrainRequest(
-                description=get_gait(gait), preset=get_preset("tiny"), iterations=1, library=root / "library",
-                run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
+    def build(root: Path) -> None:
+        for gait in TINY_GAITS:
+            train_gait(
+                TrainRequest(
+                    description=get_gait(gait), preset=get_preset("tiny"), iterations=1, library=root / "library",
+                    run_dir=root / "runs" / gait, backend="mujoco", eval_episodes=2, eval_seconds=0.5,
+                )
             )
-        )
-    return Library(root / "library")
+
+    return Library(built_once(tmp_path_factory, "tiny", build) / "library")
 
 
 def write_foreign_json(path: Path, payload: dict) -> None:
@@ -175,16 +196,17 @@ def switching_library(tiny_library, tmp_path_factory) -> Path:
     from gaitlib.strategies.fitting import fit_library
     from gaitlib.transitions import read
 
-    root = tmp_path_factory.mktemp("switching")
-    library = copy_library(tiny_library, root / "library")
-    data_path = root / "samples.h5"
-    config = CollectConfig(
-        samples=32, num_worlds=8, push_max=400.0, backend="mujoco",
-        protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.5),
-    )
-    collect(data_path, library=library, config=config)
-    fit_library(library, read(data_path), sources=[data_path], epochs=2, min_per_label=0)  # too few to validate
-    return library.root
+    def build(root: Path) -> None:
+        library = copy_library(tiny_library, root / "library")
+        data_path = root / "samples.h5"
+        config = CollectConfig(
+            samples=32, num_worlds=8, push_max=400.0, backend="mujoco",
+            protocol=TrialProtocol.collection(horizon_s=1.0, warmup_s=0.3, source_extra_s=0.5),
+        )
+        collect(data_path, library=library, config=config)
+        fit_library(library, read(data_path), sources=[data_path], epochs=2, min_per_label=0)  # too few to validate
+
+    return built_once(tmp_path_factory, "switching", build) / "library"
 
 
 def git(*args: str, cwd: Path) -> str:
