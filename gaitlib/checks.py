@@ -244,6 +244,8 @@ def plain() -> Check:
     """Any JSON value whose numbers are all finite (a free-form part of a record)."""
 
     def check(value: object, field: str) -> None:
+        if _all_finite(value):  # the common case, without a field name for each of thousands of numbers
+            return
         if isinstance(value, float) and not math.isfinite(value):
             raise Invalid(field, f"must be a finite number, got {shown(value)}")
         if isinstance(value, Mapping):
@@ -254,6 +256,28 @@ def plain() -> Check:
                 check(v, at(field, i))
 
     return check
+
+
+def _all_finite(value: object) -> bool:
+    """Whether every float in ``value`` (nested mappings, lists and tuples) is finite; JSON's own types first."""
+    todo = [value]
+    while todo:
+        item = todo.pop()
+        kind = type(item)
+        if kind is float:
+            if not math.isfinite(item):
+                return False
+        elif kind is dict:
+            todo.extend(item.values())
+        elif kind is list or kind is tuple:
+            todo.extend(item)
+        elif isinstance(item, Mapping):
+            todo.extend(item.values())
+        elif isinstance(item, (list, tuple)):
+            todo.extend(item)
+        elif isinstance(item, float) and not math.isfinite(item):
+            return False
+    return True
 
 
 def check_content(content: object, schema: Check, *, error: type[Exception], prefix: str, suffix: str = "") -> None:

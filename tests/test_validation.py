@@ -153,7 +153,29 @@ METADATA_EDITS = {
                                   "training.randomization.action_delay_steps must be a range [low, high]"),
     "a changed stiffness in the deployment block": (lambda m: m["deployment"]["control"].update(kp=61.0),
                                                     "deployment.control.kp is not what the entry's own"),
+    # The reference table's thousands of numbers are checked in one loop; a refusal still names the one that differs.
+    "a reference number off by 1e-5": (lambda m: _row(m, 100).__setitem__(3, _row(m, 100)[3] + 1e-5),
+                                       "deployment.reference.rows[100][3] is not what the entry's own"),
+    "a reference number as true": (lambda m: _row(m, 5).__setitem__(0, True),
+                                   "deployment.reference.rows[5][0] is not what the entry's own"),
+    "a reference number as text": (lambda m: _row(m, 5).__setitem__(0, str(_row(m, 5)[0])),
+                                   "deployment.reference.rows[5][0] is not what the entry's own"),
+    "a reference row cut short": (lambda m: _row(m, 7).pop(),
+                                  "deployment.reference.rows[7] is not what the entry's own"),
+    "a nan in the reference table": (lambda m: _row(m, 7).__setitem__(2, float("nan")),
+                                     "deployment.reference.rows[7][2] must be a finite number, got nan"),
 }
+
+
+def _row(metadata: dict, k: int) -> list:
+    """Row ``k`` of an entry's reference table, as its deployment block holds it."""
+    return metadata["deployment"]["reference"]["rows"][k]
+
+
+def test_a_reference_number_within_the_tables_rounding_is_accepted(shipped_copy) -> None:
+    path = shipped_copy.root / "stand" / "metadata.json"
+    with edited(path, lambda m: _row(m, 100).__setitem__(3, _row(m, 100)[3] + 1e-6)):
+        assert Library(shipped_copy.root).entry("stand").identity
 
 
 @pytest.mark.parametrize("edit", list(METADATA_EDITS), ids=list(METADATA_EDITS))
