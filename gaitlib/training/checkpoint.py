@@ -30,8 +30,7 @@ _RECORD = {"gait": str, "preset": str, "samples": int, "elapsed_s": (int, float)
 """The run record a gaitlib checkpoint keeps in ``infos``: key -> type."""
 
 _OPTION = {"description": "--gait-file", "states_sha256": "--states", "preset": "--preset", "worlds": "--worlds",
-           "seed": "--seed",
-           "switch_start": "--switch-start", "library": "--library", "gait": "GAIT"}
+           "seed": "--seed", "switch_start": "--switch-start", "library": "--library", "gait": "GAIT"}
 """Identity key -> the option of ``gaitlib train`` that sets it (the recipe's keys name their own options)."""
 
 
