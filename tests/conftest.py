@@ -108,7 +108,7 @@ def make(backend_name: str):
 
 def built_once(tmp_path_factory: pytest.TempPathFactory, name: str, build: Callable[[Path], None]) -> Path:
     """The folder ``name`` made by ``build(folder)`` once for the whole run: under pytest-xdist the first worker to
-    ask builds it and the others wait for it and share it, as one process shares a session fixture (read-only to
+    ask builds it and the others wait for it and share it, as the tests of one process share it (read-only to
     the tests: copy it before writing)."""
     base = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):

@@ -177,14 +177,14 @@ def library_status(library: Library) -> LibraryStatus:
             text = f"the switching models were fitted with {', '.join(gone)}, which the library no longer holds"
             keep = [d["path"] for d in bundle.data]
             fit = _command("gaitlib", "fit", "--library", root, *[w for path in keep for w in ("--data", path)])
-            problems.append(Problem(text, (fit,) if all(Path(p).is_file() for p in keep) else first_fit(root)))
+            problems.append(Problem(text, (fit,) if _data_here(bundle) else first_fit(root)))
         todo = [p for p, state in pairs.items() if state != "covered"]
         if todo:
             retrained = sorted({g for p in todo for g in p.split("-") if g in bundle.identities
                                 and bundle.identities[g] != current[g]})
             why = f"retrained since the fit: {', '.join(retrained)}" if retrained else "not in the fitted data"
             text = f"the switching models do not drive {len(todo)} pair(s), {', '.join(todo)} ({why})"
-            if not all(Path(d["path"]).is_file() for d in bundle.data):
+            if not _data_here(bundle):
                 text += "; the data they were fitted on are not here, so every pair is collected again"
             problems.append(Problem(text, _refit(root, bundle, todo, usable)))
     elif len(usable) >= 2 and not library.switching_dir.is_dir():
@@ -265,13 +265,18 @@ def _collect_all(root: Path, gaits: Sequence[str]) -> tuple[str, ...]:
     return first_fit(root) if len(gaits) >= 2 else ()
 
 
+def _data_here(bundle: Bundle) -> bool:
+    """Whether every file the switching models were fitted on is here (a fresh clone has none of them)."""
+    return all(Path(d["path"]).is_file() for d in bundle.data)
+
+
 def _refit(root: Path, bundle: Bundle, pairs: Sequence[str], gaits: Sequence[str]) -> tuple[str, ...]:
     """Collect ``pairs`` with the settings of each file the models were fitted on (as many samples per pair as the
     fit had on average, split evenly over the files), then fit on the old files and the new ones; where the old
     files are not here, every pair of ``gaits`` is collected again."""
     per_pair = sum(bundle.pair_samples.values()) / max(1, len(bundle.pair_samples))
     files, keep = list(bundle.data), [d["path"] for d in bundle.data]
-    if not all(Path(path).is_file() for path in keep):
+    if not _data_here(bundle):
         pairs, keep = ordered_pairs(gaits), []
     commands, new = [], []
     for k, record in enumerate(files):
