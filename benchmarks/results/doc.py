@@ -58,8 +58,8 @@ PAGES = {
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
-"""The guards whose tables ``docs/switching.md`` shows, by the tag of their stored evaluations: the six gaits' and the
-library grown by the recovery skill's (``library-recover``)."""
+"""The guards whose tables ``docs/switching.md`` shows, by the tag of their stored evaluations: the six gaits' (made
+before the library grew) and the shipped library's, grown by the recovery skill (``recover``)."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
 """The results pages, :data:`PAGES` in order."""
 DOC = DOCS[0]

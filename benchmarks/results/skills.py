@@ -1,6 +1,7 @@
-"""The tables of the skills beyond the six shipped gaits, each staged in its own folder with its evaluation: every
-skill against the quality bar for a skill that steers, and under shoves, from the evidence stored for each staging
-folder (``docs/results/steer`` for ``library-steer/``, ``docs/results/recover`` for ``library-recover/``)."""
+"""The tables of the skills beyond the six gaits, each in the library that holds it with its evaluation: every
+skill against the quality bar for a skill that steers, and under shoves, from the evidence stored for each folder
+(``docs/results/steer`` for ``library-steer/``, staged; ``docs/results/recover`` for the shipped ``library/``'s
+recovery skill)."""
 
 from __future__ import annotations
 
@@ -22,8 +23,9 @@ from gaitlib.stats import wilson_interval
 
 __all__ = ["STAGED", "STILL", "skill_misses", "skills_bar", "skills_shoves"]
 
-STAGED = {"steer": "library-steer", "recover": "library-recover"}
-"""Each staging folder's evidence folder (under ``docs/results``) and the folder itself (under the repository)."""
+STAGED = {"steer": "library-steer", "recover": "library"}
+"""Each skill folder's evidence folder (under ``docs/results``) and the library that holds its skills (under the
+repository)."""
 STILL = 0.05
 """Where the reference's forward or lateral speed or yaw rate is 0, how far the skill's may stray: m/s, rad/s."""
 
