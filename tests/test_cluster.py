@@ -1,6 +1,6 @@
 """Collection and the benchmark sweep on Ray workers (``--ray``, since 0.2.0): the same file and the same results as
-without Ray for the same seed and chunking (two workers; one in the last test), and a killed worker loses no committed
-sample.
+without Ray for the same seed and chunking (two workers; one through the command line and in the last test), and a
+killed worker loses no committed sample.
 Ray comes with the test install (``.[test]``), so these run in CI; the one-line refusal of ``--ray`` without Ray is
 tested in ``test_refusals.py``."""
 
@@ -42,7 +42,7 @@ def test_collect_with_ray_writes_a_file_fit_reads(tiny_library, tmp_path) -> Non
     quick = ["--worlds", "8", "--horizon", "1.0", "--push-max", "400", "--backend", "mujoco", "--chunk", "8",
              "--seed", "0"]  # the same seed for both runs (without it, each collection draws its own)
     ran = gaitlib_quick("collect", "--samples", "16", "--out", data, "--library", lib, *quick, "--ray",
-                        "--workers", "2")
+                        "--workers", "1")  # the command's wiring; two workers share chunks in the tests below
     assert ran.returncode == 0, ran.stderr
     assert not ray.is_initialized()  # the local Ray was stopped with the run
     plain = str(tmp_path / "plain.h5")
