@@ -93,7 +93,7 @@ def test_every_writing_command_with_its_defaults_leaves_a_fresh_clone_clean(fres
     env = {k: v for k, v in os.environ.items() if k != "GAITLIB_LIBRARY"}
     commands = [
         ["eval", "stand", "--record", "--episodes", "2", "--seconds", "1"],
-        ["routes", "--samples", "1", "--worlds", "8"],
+        ["routes", "--samples", "1", "--worlds", "64"],  # a round of trials: its 42 pairs at once
         ["collect", "--samples", "4", "--pairs", "trot-stand", "--worlds", "4"],
         ["map", "data/transitions.h5"],
         ["benchmark", "--strategies", "random", "--magnitudes", "0", "--samples", "1", "--pairs", "trot-stand",
