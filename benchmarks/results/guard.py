@@ -24,6 +24,7 @@ from benchmarks.results.evidence import (
 )
 from benchmarks.results.switches import SWITCH_GOALS
 from gaitlib.stats import wilson_interval
+from gaitlib.strategies.survival import FALSE_ALARMS_PER_MIN
 
 __all__ = ["GOALS", "GUARD", "PAIR_TABLES", "PairTable", "guard_pairs", "guard_pushes", "guard_shoves"]
 
@@ -131,10 +132,12 @@ def guard_pushes(tag: str, folder: Path = GUARD) -> str:
             pushes = f"up to {guarded['push_max_n']:g} N" if pushed else "none"
             catches = guarded["guard"]["catches"]
             count = catches if isinstance(catches, int) else len(catches)
+            rate = f"{count} ({guarded['catches_per_min']:.2f} /min{'' if pushed else ', every one false'})"
+            if not pushed and guarded["catches_per_min"] <= FALSE_ALARMS_PER_MIN:
+                rate = f"**{rate}**"
             rows.append(f"| {gait} | {pushes}, "
                         f"{guarded['minutes']:,.0f} minutes | {_falls(unguarded)} | "
-                        f"{_falls(guarded, GOALS[50.0] if pushed else None)} | {count} "
-                        f"({guarded['catches_per_min']:.2f} /min{'' if pushed else ', every one false'}) | "
+                        f"{_falls(guarded, GOALS[50.0] if pushed else None)} | {rate} | "
                         f"{_share(guarded['guard']['measured_gait_share'])} |")
     if not rows:
         return not_yet(Path(folder) / f"push50-GAIT-{tag}.json")
@@ -142,7 +145,8 @@ def guard_pushes(tag: str, folder: Path = GUARD) -> str:
         "| gait | pushes, running time guarded | falls unguarded | falls guarded | catches | time in the gait |",
         "|---|---|---|---|---|---|", *rows, "",
         "Episodes of 20 s under the paper's random pushes of up to 50 N, and of 60 s unpushed (where every catch is a "
-        "false one, the guard's cost), the same draws both ways (seed 0); bold where within the goal of 1%. "
+        "false one, the guard's cost), the same draws both ways (seed 0); bold where within the goals: falls in at "
+        "most 1% of episodes under pushes, unpushed at most one false catch per 10 minutes of running. "
         f"Evidence: `{shown(Path(folder))}/push50-GAIT-{tag}.json` and `GAIT-0n-{tag}.json`, each with its command."])
 
 
