@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
-from benchmarks.results.guard import PAIR_TABLES, guard_pairs, guard_pushes, guard_shoves
+from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves
 from benchmarks.results.headline import (
     ACCURACY,
     CURVE,
@@ -53,8 +53,8 @@ PAGES = {
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
     "skills": ("skills-bar", "skills-shoves"),
-    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0", "guard-shoves-recover", "guard-pushes-recover",
-                  "guard-pairs-recover", "guard-pairs-menagerie-recover"),
+    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0", "guard-curve-recover", "guard-shoves-recover",
+                  "guard-pushes-recover", "guard-pairs-recover", "guard-pairs-menagerie-recover"),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
@@ -104,6 +104,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
                  for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))},
+              "guard-curve-recover": guard_curve("recover", Path(evidence_dir).parent / "guard"),
               **{f"guard-pairs-{'' if robot == 'sim' else robot + '-'}recover":
                  guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES}}
     return {name: _wrap(tables[name]) for name in TABLES}
