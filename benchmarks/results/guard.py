@@ -125,12 +125,11 @@ def guard_shoves(tag: str, folder: Path = GUARD) -> str:
 def guard_curve(tag: str, folder: Path = GUARD) -> str:
     """Each gait's single-shove curve, unguarded and guarded: the share of episodes that fall after one shove of each
     stored impulse (``shove-IMPULSE-GAIT-TAG.json``)."""
-    found = {int(p.name.split("-")[1]) for p in Path(folder).glob(f"shove-*-*-{tag}.json")}
-    impulses = sorted(found)
+    impulses = sorted({int(p.name.split("-")[1]) for p in Path(folder).glob(f"shove-*-*-{tag}.json")})
     if not impulses:
         return not_yet(Path(folder) / f"shove-12-GAIT-{tag}.json")
     gaits = list(dict.fromkeys(g for i in impulses for g in _gaits(folder, f"shove-{i}-{{gait}}-{tag}.json")))
-    rows = []
+    rows, episodes = [], set()
     for gait in gaits:
         cells = []
         for impulse in impulses:
@@ -140,18 +139,20 @@ def guard_curve(tag: str, folder: Path = GUARD) -> str:
                 continue
             result = evidence["result"]
             guarded, unguarded = result["points"][0], result["unguarded_points"][0]
+            episodes.add(guarded["episodes"])
             rate = guarded["falls"] / guarded["episodes"]
             goal = GOALS.get(float(impulse))
-            figure = f"{pct(rate)}"
+            figure = pct(rate)
             cells.append(f"{pct(unguarded['falls'] / unguarded['episodes'])} → "
                          f"{f'**{figure}**' if goal is not None and rate <= goal else figure}")
         rows.append(f"| {gait} | " + " | ".join(cells) + " |")
     return "\n".join([
         "| gait | " + " | ".join(f"{i} N s" for i in impulses) + " |", "|---|" + "---|" * len(impulses), *rows, "",
         "The share of episodes that fall (%), unguarded → guarded, after one shove of 0.1 s in a random direction, "
-        "1,024 episodes a point, the same draws both ways (seed 0); falls by the `trunk` definition; bold where "
-        "within the goal (at most 1% at 12 N s, 10% at 18 N s). Unshoved, no entry falls either way (the unpushed "
-        "rows below). Evidence: " + f"`{shown(Path(folder))}/shove-IMPULSE-GAIT-{tag}.json`, each with its command."])
+        f"{', '.join(f'{n:,}' for n in sorted(episodes))} episodes a point, the same draws both ways (seed 0); falls "
+        "by the `trunk` definition; bold where within the goal (at most 1% at 12 N s, 10% at 18 N s). Unshoved, no "
+        "entry falls either way (the unpushed rows below). Evidence: "
+        f"`{shown(Path(folder))}/shove-IMPULSE-GAIT-{tag}.json`, each with its command."])
 
 
 def guard_pushes(tag: str, folder: Path = GUARD) -> str:
