@@ -320,3 +320,28 @@ def test_references_read_together_are_the_references_read_one_by_one() -> None:
     for together, alone in zip(tracker.frames(offsets), [tracker.frame(dt) for dt in offsets], strict=True):
         for name in alone.__dataclass_fields__:  # bit for bit: the environment's samples must not change
             assert torch.equal(getattr(together, name), getattr(alone, name)), name
+
+
+def test_clips_read_in_one_bank_are_each_clip_read_alone_bit_for_bit() -> None:
+    from gaitlib.envs.reference import ReferenceTracker
+    from gaitlib.gaits.clip import ReferenceClip, clip_bank
+
+    walk = clip_from_description(get_gait("walk"))
+    held = ReferenceClip.from_frames(name="held", frame_duration=walk.frame_duration, loop=False,
+                                     root_pos=walk.root_pos, root_quat=walk.root_quat, joint_pos=walk.joint_pos,
+                                     contact=walk.contact)  # not looping: its phase clamps
+    clips = (clip_from_description(get_gait("trot_left")), walk, held, clip_from_description(get_gait("turn_left")))
+    assert [clip.cycle_yaw != 0.0 for clip in clips] == [True, False, False, True]
+    generator = torch.Generator().manual_seed(5)
+    gait = torch.randint(0, len(clips), (64,), generator=generator)
+    phase = torch.rand(64, generator=generator) * 8.0 - 3.0  # whole cycles on both sides of 0
+    together = clip_bank(clips, torch.device("cpu")).frame(gait, phase)
+    for g, clip in enumerate(clips):
+        rows = (gait == g).nonzero().squeeze(1)
+        alone = clip.frame(phase[rows])
+        for name in alone.__dataclass_fields__:  # bit for bit: the environment's samples must not change
+            assert torch.equal(getattr(together, name)[rows], getattr(alone, name)), (clip.name, name)
+
+    tracker = ReferenceTracker(list(clips), 64, torch.device("cpu"))
+    tracker.gait[:], tracker.phase[:] = gait, phase
+    assert torch.equal(tracker.joint_pos(1 / 30), tracker.frame(1 / 30).joint_pos)

@@ -138,8 +138,7 @@ class ImitationEnv:
         actions = actions.to(self.device).clamp(-cfg.action_clip, cfg.action_clip)
         self._action = actions
         noise = self._noise(actions.shape, cfg.randomization.action_noise)
-        ahead = self.reference.frame(self.dt)
-        targets = ahead.joint_pos + cfg.action_scale * actions + noise
+        targets = self.reference.joint_pos(self.dt) + cfg.action_scale * actions + noise
         clipped = torch.maximum(torch.minimum(targets, self._upper), self._lower)
         self._targets = torch.cat([clipped.unsqueeze(1), self._targets[:, :-1]], dim=1)
         delay = self._params.action_delay.to(self.device).long()

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from gaitlib.gaits import ClipFrame, ReferenceClip
+from gaitlib.gaits.clip import clip_bank
 from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
 from gaitlib.sim import KinematicState
 
@@ -36,6 +37,7 @@ class ReferenceTracker:
 
     def __init__(self, clips: list[ReferenceClip], num_worlds: int, device: torch.device) -> None:
         self.clips = clips
+        self._bank = clip_bank(tuple(clips), torch.device(device))
         self.device = device
         self.gait = torch.zeros(num_worlds, dtype=torch.long, device=device)
         """(N,) index into ``clips`` of the gait each world imitates."""
@@ -98,6 +100,11 @@ class ReferenceTracker:
         gait = self.gait[ids]
         return self._frame(gait, self.phase[ids] + dt * self._rate[gait], self._offset[ids], self._yaw[ids])
 
+    def joint_pos(self, dt: float) -> torch.Tensor:
+        """(N, 12) the reference's joint angles ``dt`` seconds ahead, rad: ``frame(dt).joint_pos``, without the
+        trunk's and feet's placement (what an action is added to, every control step)."""
+        return self._clip_frames(self.gait, self.phase + dt * self._rate[self.gait]).joint_pos
+
     def frames(self, dts: Sequence[float]) -> list[ReferenceFrame]:
         """The references ``dts`` seconds ahead of the current phase, for all worlds: the same as
         ``[frame(dt) for dt in dts]``, in one read of the clips (per control step, most of an environment's own
@@ -130,19 +137,5 @@ class ReferenceTracker:
         )
 
     def _clip_frames(self, gait: torch.Tensor, phase: torch.Tensor) -> ClipFrame:
-        """Clip frames of each world's own gait (one clip read per gait present)."""
-        if len(self.clips) == 1:
-            return self.clips[0].frame(phase)
-        parts = {}
-        for g in torch.unique(gait).tolist():
-            rows = (gait == g).nonzero().squeeze(1)
-            parts[g] = (rows, self.clips[g].frame(phase[rows]))
-        first = next(iter(parts.values()))[1]
-        merged = {}
-        for name in first.__dataclass_fields__:
-            sample = getattr(first, name)
-            out = torch.empty((len(gait), *sample.shape[1:]), dtype=sample.dtype, device=sample.device)
-            for rows, frame in parts.values():
-                out[rows] = getattr(frame, name)
-            merged[name] = out
-        return ClipFrame(**merged)
+        """Clip frames of each world's own gait (one read of the clips, whatever the gaits present)."""
+        return self._bank.frame(gait, phase)

@@ -15,7 +15,9 @@ the nearest frame. Units SI; the world frame is z up; quaternions are (w, x, y, 
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,7 +27,7 @@ from gaitlib.gaits.kinematics import forward_kinematics
 from gaitlib.robots.a1.constants import NUM_JOINTS, NUM_LEGS
 from gaitlib.rotations import quat_conjugate, quat_from_yaw, quat_multiply, quat_rotate, quat_to_rotation_vector
 
-__all__ = ["ClipFrame", "ReferenceClip"]
+__all__ = ["ClipBank", "ClipFrame", "ReferenceClip", "clip_bank"]
 
 
 @dataclass
@@ -241,50 +243,8 @@ class ReferenceClip:
         Returns:
             The :class:`ClipFrame` of the N phases.
         """
-        table, contact, displacement, turn = self._device_tables(phase.device)
-        phase = phase.to(torch.float32)
-        if self.loop:
-            cycles = torch.floor(phase)
-            fraction = phase - cycles
-        else:
-            cycles = torch.zeros_like(phase)
-            fraction = phase.clamp(0.0, 1.0)
-        intervals = self.num_frames - 1
-        position = fraction * intervals
-        lower = position.floor().long().clamp(0, intervals - 1)
-        weight = (position - lower).unsqueeze(-1)
-        row = table[lower] * (1.0 - weight) + table[lower + 1] * weight
-        columns = row.split([w for _, w in _TABLE_FIELDS], dim=-1)
-        values = dict(zip((n for n, _ in _TABLE_FIELDS), columns, strict=True))
-        count = phase.shape[0]
-        root_quat = torch.nn.functional.normalize(values["root_quat"], dim=-1)
-        root_pos, root_lin_vel = values["root_pos"], values["root_lin_vel"]
-        foot_pos_world = values["foot_pos_world"].reshape(count, NUM_LEGS, 3)
-        if self.cycle_yaw == 0.0:
-            shift = cycles.unsqueeze(-1) * displacement
-            root_pos, foot_pos_world = root_pos + shift, foot_pos_world + shift.unsqueeze(1)
-        else:  # turned by k cycle yaws about the first frame's trunk, shifted by the turned displacements before
-            yaw, pivot, circle = turn[0], turn[1:4], turn[4:6]
-            spin = quat_from_yaw(cycles * yaw)
-            cos, sin = torch.cos(cycles * yaw), torch.sin(cycles * yaw)
-            # sum_{i<k} Rz(i yaw) d = c (1 - e^{i k yaw}) in the complex plane, c = d / (1 - e^{i yaw})
-            shift = torch.stack([circle[0] * (1.0 - cos) + circle[1] * sin, circle[1] * (1.0 - cos) - circle[0] * sin,
-                                 torch.zeros_like(cos)], dim=-1) + pivot
-            root_pos = quat_rotate(spin, root_pos - pivot) + shift
-            foot_pos_world = quat_rotate(spin.unsqueeze(1), foot_pos_world - pivot) + shift.unsqueeze(1)
-            root_quat = quat_multiply(spin, root_quat)
-            root_lin_vel = quat_rotate(spin, root_lin_vel)
-        return ClipFrame(
-            root_pos=root_pos,
-            root_quat=root_quat,
-            root_lin_vel=root_lin_vel,
-            root_ang_vel=values["root_ang_vel"],
-            joint_pos=values["joint_pos"],
-            joint_vel=values["joint_vel"],
-            foot_pos_local=values["foot_pos_local"].reshape(count, NUM_LEGS, 3),
-            foot_pos_world=foot_pos_world,
-            contact=contact[position.round().long().clamp(0, intervals)],
-        )
+        gait = torch.zeros(phase.shape[0], dtype=torch.long, device=phase.device)
+        return clip_bank((self,), phase.device).frame(gait, phase)
 
     def _device_tables(self, device: torch.device) -> tuple[torch.Tensor, ...]:
         """The float32 frame table (K+1, 61), contact table (K+1, 4), displacement (3,) and turn (6,) on ``device``:
@@ -302,6 +262,88 @@ class ReferenceClip:
                 torch.tensor([self.cycle_yaw, *pivot, circle.real, circle.imag], dtype=torch.float32, device=device),
             )
         return self._tables[device]
+
+
+class ClipBank:
+    """Several clips read as one: every row of a batch at its own clip and phase, in one interpolation whatever the
+    number of clips among the rows (per control step at a few worlds, reading references is most of an
+    environment's own time, and a read per clip would multiply it). Build one with :func:`clip_bank`."""
+
+    def __init__(self, clips: tuple[ReferenceClip, ...], device: torch.device) -> None:
+        tables = [clip._device_tables(device) for clip in clips]
+        frames = [clip.num_frames for clip in clips]
+        self._table = torch.cat([t[0] for t in tables])  # (sum of K+1, 61): the clips' frame tables one after another
+        self._contact = torch.cat([t[1] for t in tables])
+        self._start = torch.tensor([sum(frames[:i]) for i in range(len(clips))], device=device)  # first row per clip
+        self._intervals = torch.tensor([k - 1 for k in frames], device=device)  # K per clip
+        self._loop = torch.tensor([clip.loop for clip in clips], device=device)
+        self._displacement = torch.stack([t[2] for t in tables])  # (G, 3), m
+        self._turn = torch.stack([t[3] for t in tables])  # (G, 6): see ReferenceClip._device_tables
+        self._turning = torch.tensor([clip.cycle_yaw != 0.0 for clip in clips], device=device)
+        self._any_turning = bool(self._turning.any())
+        self._one = len(clips) == 1
+
+    def _of(self, gait: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
+        """Each row's value of a per-clip table (G, ...): one clip's (1, ...) row broadcasts, unread per row."""
+        return (lambda table: table) if self._one else (lambda table: table[gait])
+
+    def frame(self, gait: torch.Tensor, phase: torch.Tensor) -> ClipFrame:
+        """Each of N rows at its clip's index ``gait`` (N,) and its ``phase`` (N,) in cycles: row for row what that
+        clip's :meth:`ReferenceClip.frame` gives, to the bit."""
+        phase = phase.to(torch.float32)
+        of = self._of(gait)
+        loop, intervals = of(self._loop), of(self._intervals)
+        cycles = torch.where(loop, torch.floor(phase), 0.0)
+        fraction = torch.where(loop, phase - cycles, phase.clamp(0.0, 1.0))
+        position = fraction * intervals.to(torch.float32)
+        lower = torch.minimum(position.floor().long().clamp(min=0), intervals - 1)
+        weight = (position - lower).unsqueeze(-1)
+        at = of(self._start) + lower
+        row = self._table[at] * (1.0 - weight) + self._table[at + 1] * weight
+        values = dict(zip((n for n, _ in _TABLE_FIELDS), row.split([w for _, w in _TABLE_FIELDS], dim=-1),
+                          strict=True))
+        count = phase.shape[0]
+        root_quat = torch.nn.functional.normalize(values["root_quat"], dim=-1)
+        root_pos, root_lin_vel = values["root_pos"], values["root_lin_vel"]
+        foot_pos_world = values["foot_pos_world"].reshape(count, NUM_LEGS, 3)
+        shift = cycles.unsqueeze(-1) * of(self._displacement)
+        moved_root, moved_feet = root_pos + shift, foot_pos_world + shift.unsqueeze(1)
+        if self._any_turning:  # turned by k cycle yaws about the first frame's trunk, shifted by the turned
+            # displacements before: sum_{i<k} Rz(i yaw) d = c (1 - e^{i k yaw}) in the complex plane,
+            # c = d / (1 - e^{i yaw})
+            rows = self._turning[gait].nonzero().squeeze(1)
+            turn, k = self._turn[gait[rows]], cycles[rows]
+            yaw, pivot, circle = turn[:, 0], turn[:, 1:4], turn[:, 4:6]
+            spin = quat_from_yaw(k * yaw)
+            cos, sin = torch.cos(k * yaw), torch.sin(k * yaw)
+            shift = torch.stack([circle[:, 0] * (1.0 - cos) + circle[:, 1] * sin,
+                                 circle[:, 1] * (1.0 - cos) - circle[:, 0] * sin, torch.zeros_like(cos)], dim=-1)
+            shift = shift + pivot
+            moved_root[rows] = quat_rotate(spin, root_pos[rows] - pivot) + shift
+            feet = foot_pos_world[rows] - pivot.unsqueeze(1)
+            moved_feet[rows] = quat_rotate(spin.unsqueeze(1), feet) + shift.unsqueeze(1)
+            root_quat[rows] = quat_multiply(spin, root_quat[rows])
+            root_lin_vel = root_lin_vel.clone()
+            root_lin_vel[rows] = quat_rotate(spin, root_lin_vel[rows])
+        nearest = torch.minimum(position.round().long().clamp(min=0), intervals)
+        return ClipFrame(
+            root_pos=moved_root,
+            root_quat=root_quat,
+            root_lin_vel=root_lin_vel,
+            root_ang_vel=values["root_ang_vel"],
+            joint_pos=values["joint_pos"],
+            joint_vel=values["joint_vel"],
+            foot_pos_local=values["foot_pos_local"].reshape(count, NUM_LEGS, 3),
+            foot_pos_world=moved_feet,
+            contact=self._contact[of(self._start) + nearest],
+        )
+
+
+@functools.lru_cache(maxsize=32)
+def clip_bank(clips: tuple[ReferenceClip, ...], device: torch.device) -> ClipBank:
+    """The :class:`ClipBank` of ``clips`` on ``device``, built once (a guard builds a reference tracker on the same
+    clips every control step)."""
+    return ClipBank(clips, device)
 
 
 def _turn(vector: np.ndarray, yaw: float) -> np.ndarray:
