@@ -4,7 +4,8 @@ Prints one JSON line per measurement on stdout (everything else, Warp's and MuJo
 stderr); a measurement that fails prints a line with an ``"error"`` and the check goes on to the next one. The exit
 status is 1 when any line has an error or parity failed. Sized for one H100 in under 8 minutes, Warp's kernel
 compilation on a fresh machine included; ``--tiny`` runs every measurement on the CPU at a few worlds (one world
-count for ``sim``) in about 20 s (what CI runs).
+count for ``sim``) in about 20 s. The tests run :func:`check` at :data:`TINY` in their own process, where Newton is
+imported already, and this script without CUDA at its real sizes, where every line is an error.
 
     python benchmarks/gpu_check.py            # on a CUDA machine
     python benchmarks/gpu_check.py --tiny     # on the CPU
@@ -19,7 +20,7 @@ import sys
 import tempfile
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -30,6 +31,8 @@ __all__ = [
     "FULL",
     "TINY",
     "CheckSizes",
+    "check",
+    "has_failed",
     "main",
     "measure_collect",
     "measure_parity",
@@ -105,8 +108,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tiny", action="store_true", help="run on the CPU at a few worlds (CI)")
     args = parser.parse_args()
-    sizes = TINY if args.tiny else FULL
     out = _take_stdout()
+    failed = False
+    for line in check(TINY if args.tiny else FULL):
+        failed |= has_failed(line)
+        out.write(json.dumps(line) + "\n")
+        out.flush()
+    sys.exit(1 if failed else 0)
+
+
+def check(sizes: CheckSizes) -> Iterator[dict[str, object]]:
+    """Every measurement at ``sizes``, one line each as it ends: its figures, or its error."""
     jobs: list[tuple[str, int | None, Callable[[], dict[str, object]]]] = [
         ("sim", n, lambda n=n: measure_sim(sizes, worlds=n)) for n in sizes.sim_worlds
     ]
@@ -115,13 +127,13 @@ def main() -> None:
         ("train", None, lambda: measure_train(sizes)),  # its worlds come with its figures
         ("collect", sizes.collect_worlds, lambda: measure_collect(sizes)),
     ]
-    failed = False
     for measure, worlds, job in jobs:
-        line = _run_one(measure, worlds, job, sizes)
-        failed |= "error" in line or line.get("passed") is False
-        out.write(json.dumps(line) + "\n")
-        out.flush()
-    sys.exit(1 if failed else 0)
+        yield _run_one(measure, worlds, job, sizes)
+
+
+def has_failed(line: Mapping[str, object]) -> bool:
+    """Whether a measurement's line is an error or a failed parity (the check then exits with status 1)."""
+    return "error" in line or line.get("passed") is False
 
 
 def _take_stdout() -> TextIO:

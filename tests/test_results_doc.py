@@ -223,7 +223,7 @@ def test_a_doc_without_a_tables_block_is_refused(tmp_path: Path, evidence: Path)
         tables.check_doc(doc, evidence, tmp_path / "accuracy.json")
 
 
-def test_each_table_is_on_its_own_page(tmp_path: Path, evidence: Path) -> None:
+def test_each_table_is_on_its_own_page(tmp_path: Path, evidence: Path, capsys) -> None:
     """Every table belongs to one page; a block on another page, or a file that is no results page, is refused in
     one line before anything is written, and the page's other blocks are written as on the results page."""
     assert sorted(tables.TABLES) == sorted(set(tables.TABLES))
@@ -239,9 +239,8 @@ def test_each_table_is_on_its_own_page(tmp_path: Path, evidence: Path) -> None:
         tables.write_doc(misplaced, evidence, tmp_path / "accuracy.json")
     other = tmp_path / "notes.md"
     other.write_text("<!-- table: quality-bar -->\nold\n<!-- /table -->\n")
-    done = subprocess.run([sys.executable, "-m", "benchmarks.results", "--doc", str(ablation), "--doc", str(other)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
-    assert done.returncode == 2 and "notes.md is not a results page" in done.stderr
+    assert tables.main(["--doc", str(ablation), "--doc", str(other)]) == 2  # ``python -m``: the test above
+    assert "notes.md is not a results page" in capsys.readouterr().err
     assert other.read_text() == "<!-- table: quality-bar -->\nold\n<!-- /table -->\n"
 
 

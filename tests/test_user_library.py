@@ -25,12 +25,19 @@ from gaitlib.training.recipe import Recipe
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run(*args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess[str]:
-    """``gaitlib ARGS`` in a child process started in ``cwd`` (whose ``gaitlib/`` package it imports, if any)."""
-    return subprocess.run(
-        [sys.executable, "-c", "from gaitlib.cli import main; main()", *args],
-        capture_output=True, text=True, cwd=cwd, timeout=600, env=env,
-    )
+def run(*commands: list[str], cwd: Path, env: dict) -> list[subprocess.CompletedProcess[str]]:
+    """Each of ``commands`` (``gaitlib ARGS``), one after another as a user's shell would run them, in one child
+    process started in ``cwd`` (importing torch once, not once a command): each command's exit code, stdout and
+    stderr, through :func:`cli_runner.gaitlib_quick` of that folder's ``tests/``."""
+    each = ("import dataclasses, json, sys\nsys.path.insert(0, 'tests')\nfrom cli_runner import gaitlib_quick\n"
+            "done = [gaitlib_quick(*args) for args in json.loads(sys.argv[1])]\n"
+            "print(json.dumps([[d.returncode, d.stdout, d.stderr] for d in done]))\n")
+    child = subprocess.run([sys.executable, "-c", each, json.dumps(commands)], capture_output=True, text=True,
+                           cwd=cwd, timeout=600, env=env)
+    assert child.returncode == 0, child.stderr
+    results = json.loads(child.stdout.splitlines()[-1])
+    return [subprocess.CompletedProcess(["gaitlib", *args], *result) for args, result in zip(commands, results,
+                                                                                              strict=True)]
 
 
 def run_fix(commands: list[str], library: Path) -> None:
@@ -49,8 +56,12 @@ def run_fix(commands: list[str], library: Path) -> None:
 
 def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alone(fresh_copy) -> None:
     env = {k: v for k, v in os.environ.items() if k != "GAITLIB_LIBRARY"}
-    trained = run("train", "stand", "--iterations", "1", "--worlds", "64", "--eval-episodes", "2",
-                  "--eval-seconds", "1", cwd=fresh_copy, env=env)
+    trained, main_job, refused = run(
+        ["train", "stand", "--iterations", "1", "--worlds", "64", "--eval-episodes", "2", "--eval-seconds", "1"],
+        ["run", "--from", "trot", "--to", "stand", "--json"],  # the README's main job on the shipped library
+        ["train", "stand", "--iterations", "1", "--library", "library"],
+        cwd=fresh_copy, env=env,
+    )
     assert trained.returncode == 0, trained.stderr
     assert "runs/library is your own library, made now as a copy of the shipped" in trained.stderr
     stale = [line for line in trained.stderr.splitlines() if line.startswith("next: the switching models do not")]
@@ -70,14 +81,12 @@ def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alon
     assert mine.entry("trot").identity == shipped.entry("trot").identity
     assert mine.entry("stand").identity != shipped.entry("stand").identity
 
-    main_job = run("run", "--from", "trot", "--to", "stand", "--json", cwd=fresh_copy, env=env)
     assert main_job.returncode == 0, main_job.stderr
     report = json.loads(main_job.stdout)  # the README's main job on the shipped library, seed 0
     assert [(s["from"], s["to"]) for s in report["switches"]] == [("trot", "stand")]
     assert report["switches"][0]["switch_s"] >= 2.0 - 1e-6 and report["stayed_up"] and report["fell_s"] is None
     assert report["falls"] == "trunk" and (fresh_copy / "run.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
-    refused = run("train", "stand", "--iterations", "1", "--library", "library", cwd=fresh_copy, env=env)
     assert refused.returncode == 2 and refused.stdout == ""
     assert refused.stderr.startswith("gaitlib: error: gaitlib train would rewrite the entry stand of the shipped "
                                      "library, library;")
@@ -99,12 +108,8 @@ def test_every_writing_command_with_its_defaults_leaves_a_fresh_clone_clean(fres
         ["benchmark", "--strategies", "random", "--magnitudes", "0", "--samples", "1", "--pairs", "trot-stand",
          "--worlds", "2"],
     ]
-    each = ("import json, sys\nfrom gaitlib.cli import main\nfor args in json.loads(sys.argv[1]):\n"
-            "    sys.argv = ['gaitlib', *args]\n    try:\n        main()\n    except SystemExit as exit_:\n"
-            "        if exit_.code:\n            sys.exit(f'{args[0]} exited with {exit_.code}')\n")
-    done = subprocess.run([sys.executable, "-c", each, json.dumps(commands)], capture_output=True, text=True,
-                          cwd=fresh_copy, timeout=600, env=env)
-    assert done.returncode == 0, done.stderr
+    for done in run(*commands, cwd=fresh_copy, env=env):
+        assert done.returncode == 0, done.stderr
     mine = Library(fresh_copy / "runs" / "library")
     assert json.loads((mine.root / "stand" / "metadata.json").read_text())["evaluation"]["episodes"] == 2
     assert (mine.switching_dir / "routes.json").is_file()
