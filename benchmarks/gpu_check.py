@@ -106,7 +106,7 @@ TINY = CheckSizes(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tiny", action="store_true", help="run on the CPU at a few worlds (CI)")
+    parser.add_argument("--tiny", action="store_true", help="run on the CPU at a few worlds (what the tests run)")
     args = parser.parse_args()
     out = _take_stdout()
     failed = False
