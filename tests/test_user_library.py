@@ -29,7 +29,7 @@ def run(*commands: list[str], cwd: Path, env: dict) -> list[subprocess.Completed
     """Each of ``commands`` (``gaitlib ARGS``), one after another as a user's shell would run them, in one child
     process started in ``cwd`` (importing torch once, not once a command): each command's exit code, stdout and
     stderr, through :func:`cli_runner.gaitlib_quick` of that folder's ``tests/``."""
-    each = ("import json, sys\nsys.path.insert(0, 'tests')\nfrom cli_runner import gaitlib_quick\n"
+    each = ("import json, sys\nfrom tests.cli_runner import gaitlib_quick\n"
             "done = [gaitlib_quick(*args) for args in json.loads(sys.argv[1])]\n"
             "print(json.dumps([[d.returncode, d.stdout, d.stderr] for d in done]))\n")
     child = subprocess.run([sys.executable, "-c", each, json.dumps(commands)], capture_output=True, text=True,
