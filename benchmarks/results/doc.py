@@ -6,7 +6,8 @@
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
 ``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
 ``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve),
-``docs/skills.md`` (the staged skills beyond the six gaits) and ``docs/switching.md`` (the guard).
+``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard) and
+``docs/results_history.md`` (the guard before the library grew).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
@@ -53,13 +54,15 @@ PAGES = {
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
     "skills": ("skills-bar", "skills-shoves"),
-    "switching": ("guard-shoves-best-f0", "guard-pushes-best-f0", "guard-curve-recover", "guard-shoves-recover",
-                  "guard-pushes-recover", "guard-pairs-recover", "guard-pairs-menagerie-recover"),
+    "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
+                  "guard-pairs-menagerie-recover"),
+    "results_history": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
 }
 """Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
-"""The guards whose tables ``docs/switching.md`` shows, by the tag of their stored evaluations: the six gaits' (made
-before the library grew) and the shipped library's, grown by the recovery skill (``recover``)."""
+"""The guards whose tables the pages show, by the tag of their stored evaluations: the six gaits' (made before the
+library grew, ``docs/results_history.md``) and the shipped library's, grown by the recovery skill (``recover``,
+``docs/switching.md``)."""
 DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
 """The results pages, :data:`PAGES` in order."""
 DOC = DOCS[0]
