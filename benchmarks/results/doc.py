@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
-from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves
+from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
     ACCURACY,
     CURVE,
@@ -49,7 +49,8 @@ __all__ = [
 ]
 
 PAGES = {
-    "results": ("quality-bar", "shove-curves", "switches", "sweep", "strategies-menagerie", "net-accuracy"),
+    "results": ("quality-bar", "shove-curves", "switches", "guard-summary", "sweep", "strategies-menagerie",
+                "net-accuracy"),
     "ablation": ("robustness-gaits", "robust-library"),
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "transitions": ("net-curve",),
@@ -108,6 +109,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
                  for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))},
               "guard-curve-recover": guard_curve("recover", Path(evidence_dir).parent / "guard"),
+              "guard-summary": guard_summary("recover", Path(evidence_dir).parent / "guard"),
               **{f"guard-pairs-{'' if robot == 'sim' else robot + '-'}recover":
                  guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES}}
     return {name: _wrap(tables[name]) for name in TABLES}
