@@ -262,7 +262,11 @@ class GroupWorker:
                  progress: Callable[[str, int], None] | None = None) -> None:
         from gaitlib.meta import load_switching
 
-        self._setup = setup if setup is not None else load_switching(library)
+        if setup is None:
+            setup = load_switching(library)
+            if config.pairs is not None and not (config.guard or config.routes):
+                setup = setup.serving(config.pairs)  # as the command served them (gaitlib benchmark --pairs)
+        self._setup = setup
         if self._setup.resources.library.identities(self._setup.gaits) != identities:
             raise GaitlibError(f"the library at {library} holds other policies than the sweep's (identities)")
         self._pairs, self._cfg, self._progress = [tuple(p) for p in pairs], config, progress

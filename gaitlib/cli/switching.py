@@ -167,7 +167,10 @@ def benchmark_command(
         f"at most {MAX_MAGNITUDES} distinct values.",
     ),
     samples: int = bounded(100, "--samples", help="Transitions per (strategy, pair, magnitude) cell;", bounds=COUNT),
-    pairs: str | None = typer.Option(None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all)."),
+    pairs: str | None = typer.Option(
+        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all); the switching models need to "
+        "drive these alone, unless --guard or --routed (they switch among every gait)."
+    ),
     out: Path = typer.Option(Path("benchmark"), "--out", help="Output folder (resumed if it holds results)."),
     worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
@@ -222,6 +225,9 @@ def benchmark_command(
     check_worlds("--worlds", worlds, backend=backend)
     swept = parse_magnitudes(magnitudes)
     setup = load_switching(library)
+    served = parse_pairs(pairs, list(setup.gaits))
+    if served is not None and not (guard or guard_margin is not None or routed):
+        setup = setup.serving(served)  # models fitted on these pairs alone will do (not for a guard or routes)
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())
     for name in names:
         get_strategy(name, setup.resources)  # unknown names and missing TMT/net fail here, before any work
@@ -235,7 +241,7 @@ def benchmark_command(
         strategies=names,
         magnitudes=swept,
         samples=samples,
-        pairs=parse_pairs(pairs, list(setup.gaits)),
+        pairs=served,
         num_worlds=worlds,
         gap=gap,
         backend=backend,

@@ -220,6 +220,11 @@ def fit_command(
         "needs, so that its held-out fifth validates the fit (0: accept a fit that cannot be validated);",
         bounds=Bounds(low=0, high=1e6, whole=True),
     ),
+    per_pair: int | None = bounded(
+        None, "--per-pair", help="Fit on the first N collected samples of each ordered pair of each --data file, as "
+        "a shorter collection with the same seed holds them (default: every sample; docs/transitions.md, \"The "
+        "switch-success budget\");", bounds=Bounds(low=1, high=1e8, whole=True),
+    ),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
     thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
@@ -230,10 +235,11 @@ def fit_command(
     from gaitlib.transition_net import INPUT_KINDS, check_input_kinds
     from gaitlib.transitions import read_all
 
-    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve"), when=evaluate,
+    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve", "per_pair"),
+              when=evaluate,
               because="with --evaluate (it scores the library's net and fits nothing)")
     if curve is not None:
-        no_effect(ctx, ("replace", "ablation", "min_per_label"), when=True,
+        no_effect(ctx, ("replace", "ablation", "min_per_label", "per_pair"), when=True,
                   because="with --curve (it fits into no library)")
         _curve(data, curve, library=library, input_kind=input_kind, epochs=epochs, seed=seed, falls=falls,
                as_json=as_json)
@@ -246,7 +252,7 @@ def fit_command(
     check_input_kinds((input_kind,))  # before the library is copied
     target, copy_from = writing_library(library, replace=replace, command="gaitlib fit", what="the switching models")
     check_library(copy_from or target, command="gaitlib fit")
-    samples = read_all(data, current=Library(copy_from or target).identities())  # foreign data: refused here
+    samples = read_all(data, current=Library(copy_from or target).identities(), per_pair=per_pair)  # foreign: refused
     check_validatable(samples, falls=falls, min_per_label=min_per_label)  # too few to validate: refused here too
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
     if copy_from is not None:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +34,12 @@ class SwitchingSetup:
     @property
     def gaits(self) -> tuple[str, ...]:
         return self.resources.gaits
+
+    def serving(self, pairs: Sequence[tuple[str, str]]) -> SwitchingSetup:
+        """This setup for switching ``pairs`` only: its switching models need to drive these pairs alone (a net fitted
+        on some pairs, as a budget's curve fits them). Not for a guard or routes, which switch among every gait."""
+        resources = dataclasses.replace(self.resources, pairs=tuple(map(tuple, pairs)), _cache={})
+        return SwitchingSetup(self.entries, resources)
 
     def gait_index(self, name: str) -> int:
         """Index of gait ``name``; :class:`UnknownNameError` for a gait the library lacks, one line with the
@@ -69,7 +76,9 @@ class SwitchingSetup:
 
         check_guard(margin=margin)
         estimate = load_survival(self.resources.library, self.gaits)
-        return Guard(estimate, get_strategy("net-lookahead", self.resources), margin=margin)
+        every_pair = self.resources if self.resources.pairs is None else dataclasses.replace(
+            self.resources, pairs=None, _cache={})  # a guard offers every gait: models of some pairs are refused
+        return Guard(estimate, get_strategy("net-lookahead", every_pair), margin=margin)
 
     def controller(
         self, env: ImitationEnv, strategy: str, *, deadline_s: float = DEADLINE_S, seed: int = 0,

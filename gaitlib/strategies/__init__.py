@@ -55,6 +55,9 @@ class SwitchResources:
     """Gaits of the environment the strategies will serve, in canonical order (indices in queries follow it)."""
     seed: int = 0
     """Seed of random choices."""
+    pairs: tuple[tuple[str, str], ...] | None = None
+    """The ordered pairs the strategies will switch (``None``: every pair of :attr:`gaits`); the switching models
+    need to drive only these."""
     status: LibraryStatus | None = None
     """What state the library is in (:func:`~gaitlib.library.library_status`), when already read; read on first
     use otherwise (:meth:`library_status`)."""
@@ -101,14 +104,17 @@ class SwitchResources:
 
     def _check_coverage(self) -> None:
         """Refuse, in one line with the commands that fix it, switching models that do not drive every pair of
-        :attr:`gaits` with the library's current policies (:mod:`gaitlib.library.status`; damaged or missing
-        files are left to their own loaders' messages)."""
+        :attr:`gaits` (of :attr:`pairs`, when given) with the library's current policies
+        (:mod:`gaitlib.library.status`; damaged or missing files are left to their own loaders' messages)."""
         if "covered" in self._cache:
             return
         self.library.check_switching()
         status = self.library_status()
         if status.bundle is not None:
             missing = status.uncovered(self.gaits)
+            if self.pairs is not None:
+                served = {f"{m}-{n}" for m, n in self.pairs}
+                missing = [p for p in missing if p in served]
             refit = next((p for p in status.problems if p.about == "switching"), None)
             if (missing or set(status.bundle.gaits) != set(self.gaits)) and refit is not None:
                 raise TransitionDataError(f"library {self.library.root}: {refit.line()}")

@@ -13,6 +13,10 @@ copy holds the same committed parts (the same content SHA-256,
 :attr:`~gaitlib.transitions.records.TransitionFileInfo.files`) and is read once; a sample of a later file that is
 byte for byte a sample of an earlier one (two collections with the same seed and settings draw the same samples) is
 left out. The note names each such file, the file it repeats and how many samples were left out.
+
+A budget of ``per_pair`` keeps the first samples of each ordered pair of each file, in file order (the order they
+were collected in), as a shorter collection with the same seed would hold them: the budget of a new pair is read
+from nets fitted on such nested subsets (``docs/transitions.md``, "The switch-success budget").
 """
 
 from __future__ import annotations
@@ -30,8 +34,12 @@ from gaitlib.transitions.schema import TransitionBatch, TransitionData, Transiti
 __all__ = ["read_all"]
 
 
-def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None) -> TransitionData:
+def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None,
+             per_pair: int | None = None) -> TransitionData:
     """Read and merge the committed samples of ``paths``, gaits in canonical order.
+
+    ``per_pair``: keep at most the first this many samples of each ordered pair of each file (module doc; ``None``:
+    every sample).
 
     ``current``: gait name -> identity of the library's policies; samples of pairs collected with any other policy
     are left out (and counted in the note). ``None``: every sample is kept, and two files holding different
@@ -40,7 +48,10 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None)
     if not paths:
         raise TransitionDataError("no transition data files given")
     parts = [read(Path(p)) for p in paths]
-    if current is None and len(parts) == 1 and parts[0].header.gaits == gait_order(parts[0].header.gaits):
+    if per_pair is not None and per_pair < 1:
+        raise ValueError(f"per_pair must be at least 1, got {per_pair}")
+    if (current is None and per_pair is None and len(parts) == 1
+            and parts[0].header.gaits == gait_order(parts[0].header.gaits)):
         return parts[0]
     identities: dict[str, str] = {}
     kept_rows, notes = [], [part.info.note for part in parts if part.info.note]
@@ -67,6 +78,9 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None)
     repeats, repeated = _repeats(paths, parts)
     kept_rows = [rows & ~again for rows, again in zip(kept_rows, repeats, strict=True)]
     notes += repeated
+    if per_pair is not None:
+        kept_rows = [_first_per_pair(part.samples, rows, per_pair) for part, rows in zip(parts, kept_rows, strict=True)]
+        notes.append(f"the first {per_pair:,} samples of each ordered pair of each file kept")
     if not any(rows.any() for rows in kept_rows):
         raise TransitionDataError(
             f"no sample of {', '.join(map(str, paths))} was collected with the library's current policies"
@@ -96,6 +110,19 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None)
         tuple(file for part in parts for file in part.info.files),
     )
     return TransitionData(info, samples)
+
+
+def _first_per_pair(samples: TransitionBatch, rows: np.ndarray, count: int) -> np.ndarray:
+    """``rows`` (a mask over ``samples``) with only the first ``count`` kept samples of each ordered pair, in file
+    order."""
+    index = np.flatnonzero(rows)
+    pair = samples.source[index].astype(np.int64) * (int(samples.dest.max(initial=0)) + 1) + samples.dest[index]
+    order = np.argsort(pair, kind="stable")  # each pair's rows together, in file order
+    starts = np.flatnonzero(np.r_[True, np.diff(pair[order]) != 0])
+    rank = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
+    kept = rows.copy()
+    kept[index[order[rank >= count]]] = False
+    return kept
 
 
 def _repeats(paths: Sequence[Path], parts: Sequence[TransitionData]) -> tuple[list[np.ndarray], list[str]]:
