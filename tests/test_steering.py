@@ -43,8 +43,8 @@ STEERING = {  # gait: (forward m/s, lateral m/s, yaw rad/s)
 # Every array of each straight description's clip and 101 frames read from it over nine cycles, in float32 (what the
 # simulator reads), as the shipped library's references were built; written by running this file. They are compared
 # to float32's relative 1e-6 (and 1e-6 of the array's scale, at least 1 m, rad or s, near zero): the last bits follow
-# the processor (NumPy's SIMD kernels, AVX-512 or not, and the BLAS kernel of the trunk sway's linear solve), a
-# reference that moves by more is another reference.
+# the processor (NumPy's and torch's SIMD kernels, AVX2 or AVX-512, and the BLAS kernel of the trunk sway's linear
+# solve), a reference that moves by more is another reference.
 STRAIGHT_CLIPS = Path(__file__).parent / "references" / "straight_clips.npz"
 STRAIGHT_GAITS = ("bound", "pace", "pace_slow", "pronk", "stand", "trot", "trot_slow", "walk")
 _CLIP_ARRAYS = ("root_pos", "root_quat", "root_lin_vel", "root_ang_vel", "joint_pos", "joint_vel", "foot_pos_local",
@@ -58,7 +58,9 @@ def _clip_arrays(clip) -> dict[str, np.ndarray]:
     for name in _CLIP_ARRAYS:
         array = np.asarray(getattr(clip, name))
         arrays[name] = array.astype(np.float32) if array.dtype.kind == "f" else array
-    frame = clip.frame(torch.linspace(-1.3, 7.7, 101))
+    # phases in NumPy's float64, the same on every processor (torch.linspace's last bits follow its CPU kernel, and a
+    # phase one float32 step apart moves a joint velocity read by up to 1e-4)
+    frame = clip.frame(torch.from_numpy(np.linspace(-1.3, 7.7, 101, dtype=np.float32)))
     for name in frame.__dataclass_fields__:
         arrays[f"frame.{name}"] = getattr(frame, name).numpy()
     return arrays
