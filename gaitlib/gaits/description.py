@@ -14,6 +14,7 @@ A gait file (see ``gaitlib/gaits/descriptions/trot.toml``) has one key per :clas
     foot_lateral_offset = 0.0 # m, optional
     trunk_sway = false        # optional: the trunk sways sideways over its stance feet
     trunk_bounce = false      # optional: the trunk rises and falls as its feet push (needed for long flights)
+    task = "imitation"        # optional: imitation (follow the clip) or catch (come to a calm stance, TASKS)
 
     [phase_offsets]           # touchdown phase of each leg, cycles
     FR = 0.0
@@ -33,7 +34,12 @@ from pathlib import Path
 from gaitlib.errors import GaitError
 from gaitlib.robots.a1.constants import FOOT_RADIUS, LEG_NAMES
 
-__all__ = ["GaitDescription", "load_gait_file"]
+__all__ = ["TASKS", "GaitDescription", "load_gait_file"]
+
+TASKS = ("imitation", "catch")
+"""What a policy trained on a description learns (:attr:`GaitDescription.task`): ``imitation``, to follow the
+reference clip (the motion-imitation reward); ``catch``, to stay up and come to a calm stance from wherever it is
+handed the robot (:mod:`gaitlib.envs.catch`), its clip only the stance it comes to."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,6 +89,9 @@ class GaitDescription:
     (:func:`gaitlib.gaits.trunk_height`): it falls freely in flight and is thrown up again by its stance feet, its
     mean height ``body_height``; false: it runs at ``body_height``. A level trunk cannot follow a long flight (the
     pronk's 156 ms: ``docs/training.md``)."""
+    task: str = "imitation"
+    """One of :data:`TASKS`. A ``catch`` is trained without a reference motion: its clip must be a stance (duty
+    factor 1, no speed, no turn), the pose the robot comes to and the constant reference its observation shows."""
 
     def __post_init__(self) -> None:
         def fail(problem: str) -> GaitError:
@@ -116,6 +125,12 @@ class GaitDescription:
         for flag in ("trunk_sway", "trunk_bounce"):
             if not isinstance(getattr(self, flag), bool):
                 raise fail(f"{flag} must be true or false, got {getattr(self, flag)!r}")
+        if self.task not in TASKS:
+            raise fail(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
+        moving = (self.forward_speed, self.lateral_speed, self.yaw_rate) != (0.0, 0.0, 0.0)
+        if self.task == "catch" and (self.duty_factor != 1.0 or moving):
+            raise fail("a catch task's clip is the stance it comes to: duty_factor 1, forward_speed, lateral_speed "
+                       "and yaw_rate 0")
         if not 0.0 < self.duty_factor <= 1.0:
             raise fail(f"duty_factor must be in (0, 1], got {self.duty_factor}")
         if self.stride_frequency <= 0.0:
@@ -133,11 +148,11 @@ class GaitDescription:
 
     def record(self) -> dict:
         """The description as a JSON-ready dict (a library entry's ``"description"``), without ``lateral_speed`` and
-        ``yaw_rate`` where they are 0: a gait that runs straight is recorded as before those fields existed, and a
-        record without them reads back as 0."""
+        ``yaw_rate`` where they are 0 and without ``task`` where it is ``imitation``: a gait that runs straight and
+        imitates is recorded as before those fields existed, and a record without them reads back as the default."""
         record = dataclasses.asdict(self)
-        for key in ("lateral_speed", "yaw_rate"):
-            if record[key] == 0.0:
+        for key, default in (("lateral_speed", 0.0), ("yaw_rate", 0.0), ("task", "imitation")):
+            if record[key] == default:
                 del record[key]
         return record
 
@@ -159,7 +174,7 @@ class GaitDescription:
 
 
 _SCALAR_KEYS = ("duty_factor", "stride_frequency", "forward_speed", "swing_height", "body_height")
-_OPTIONAL_KEYS = ("name", "lateral_speed", "yaw_rate", "foot_lateral_offset", "trunk_sway", "trunk_bounce")
+_OPTIONAL_KEYS = ("name", "lateral_speed", "yaw_rate", "foot_lateral_offset", "trunk_sway", "trunk_bounce", "task")
 
 
 def load_gait_file(path: str | Path) -> GaitDescription:
@@ -192,6 +207,7 @@ def load_gait_file(path: str | Path) -> GaitDescription:
             foot_lateral_offset=table.get("foot_lateral_offset", 0.0),
             trunk_sway=table.get("trunk_sway", False),
             trunk_bounce=table.get("trunk_bounce", False),
+            task=table.get("task", "imitation"),
             **{key: table[key] for key in _SCALAR_KEYS},
         )
     except GaitError as error:

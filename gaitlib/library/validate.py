@@ -57,7 +57,8 @@ _DESCRIPTION = record(
         "body_height": number(0, 2, low_open=True, unit="m"),
     },
     {"lateral_speed": number(-10, 10, unit="m/s"), "yaw_rate": number(-20, 20, unit="rad/s"),
-     "foot_lateral_offset": number(-1, 1, unit="m"), "trunk_sway": flag(), "trunk_bounce": flag()},
+     "foot_lateral_offset": number(-1, 1, unit="m"), "trunk_sway": flag(), "trunk_bounce": flag(),
+     "task": text()},  # recorded where it is not imitation; GaitDescription checks it is one of its TASKS
 )
 _PRESET = record(
     {"name": text()},
