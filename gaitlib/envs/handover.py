@@ -45,7 +45,7 @@ from gaitlib.checks import (
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError
 
-__all__ = ["FORMAT", "LIMITS", "HandoverStates", "load_states"]
+__all__ = ["ARRAYS", "FORMAT", "LIMITS", "PUSH_ARRAYS", "HandoverStates", "load_states"]
 
 FORMAT = {"format": "gaitlib.handover_states", "format_version": 1}
 """Header of a handover-states file (``.npz``: the arrays, and ``meta``, a JSON string)."""
@@ -53,6 +53,10 @@ FORMAT = {"format": "gaitlib.handover_states", "format_version": 1}
 ARRAYS = ("source", "phase", "root_height", "root_quat", "root_lin_vel", "root_ang_vel", "joint_pos", "joint_vel",
           "history", "last_reading", "action", "targets")
 """The per-state arrays, in file order."""
+
+PUSH_ARRAYS = ("push_force", "push_steps")
+"""The arrays of the push under way at each state, which a file recorded under single shoves holds (``gaitlib
+states --shove-max``) and a file without them does not: a hand-over continues the push (both or neither)."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,16 @@ class HandoverStates:
     """(S, J) the source policy's last action (after clipping), action units."""
     targets: np.ndarray
     """(S, D, J) PD targets of the last D steps, newest first, rad (what a delayed servo still has to apply)."""
+    push_force: np.ndarray | None = None
+    """(S, 3) the push on the trunk under way when the state was taken, in the yaw-free frame, N (0: none); ``None``:
+    the file records no pushes, and a hand-over starts none (:data:`PUSH_ARRAYS`)."""
+    push_steps: np.ndarray | None = None
+    """(S,) the control steps that push still lasts after the state (0: none), a whole number as a float."""
+
+    @property
+    def arrays(self) -> tuple[str, ...]:
+        """The per-state arrays these states hold: :data:`ARRAYS`, then :data:`PUSH_ARRAYS` where recorded."""
+        return ARRAYS + (PUSH_ARRAYS if self.push_force is not None else ())
 
     def __len__(self) -> int:
         return len(self.source)
@@ -102,13 +116,13 @@ class HandoverStates:
 
     def select(self, rows: np.ndarray) -> HandoverStates:
         """The states ``rows``."""
-        return dataclasses.replace(self, **{name: getattr(self, name)[rows] for name in ARRAYS})
+        return dataclasses.replace(self, **{name: getattr(self, name)[rows] for name in self.arrays})
 
     def save(self, path: Path) -> Path:
         """Write the states to ``path`` (``.npz``), atomically."""
         meta = FORMAT | {"gaits": list(self.gaits), "identities": self.identities, "settings": self.settings}
         with atomic_path(Path(path)) as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, meta=np.array(json.dumps(meta)), **{name: getattr(self, name) for name in ARRAYS})
+            np.savez(handle, meta=np.array(json.dumps(meta)), **{name: getattr(self, name) for name in self.arrays})
         return Path(path)
 
 
@@ -122,7 +136,7 @@ def load_states(path: Path) -> tuple[HandoverStates, str]:
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             names = set(npz.files)
             meta = json.loads(str(npz["meta"]))
-            arrays = {name: npz[name] for name in ARRAYS if name in names}
+            arrays = {name: npz[name] for name in ARRAYS + PUSH_ARRAYS if name in names}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # the zip's CRC-32 catches flips
         raise GaitlibError(f"{path} is not a readable handover-states file ({type(error).__name__})") from None
     if not isinstance(meta, dict) or {k: meta.get(k) for k in FORMAT} != FORMAT:
@@ -131,9 +145,11 @@ def load_states(path: Path) -> tuple[HandoverStates, str]:
     for name in ARRAYS:
         if name not in arrays:
             raise GaitlibError(f"{damaged}array {name} is missing")
-    unknown = sorted(names - set(ARRAYS) - {"meta"})
+    unknown = sorted(names - set(ARRAYS + PUSH_ARRAYS) - {"meta"})
     if unknown:
         raise GaitlibError(f"{damaged}array {unknown[0]} is not one of a handover-states file")
+    if len(set(PUSH_ARRAYS) & names) == 1:
+        raise GaitlibError(f"{damaged}it holds one of the arrays {' and '.join(PUSH_ARRAYS)} without the other")
     check_content(meta, _META, error=GaitlibError, prefix=damaged)
     gaits = tuple(meta["gaits"])
     if set(meta["identities"]) != set(gaits):
@@ -180,6 +196,8 @@ LIMITS = {
     "last_reading": (-1000.0, 1000.0, "(observation units)"),
     "action": (-100.0, 100.0, "action units"),
     "targets": (-2 * math.pi, 2 * math.pi, "rad"),
+    "push_force": (-1e5, 1e5, "N"),
+    "push_steps": (0.0, 1e4, "control steps"),
 }
 """Array -> (lowest, highest, unit) of each of its values: a physical range (a trunk between the ground and 2 m, a
 joint within a turn either way) or a sanity bound far beyond what a robot that runs reaches. A root height of 0 is
@@ -204,7 +222,7 @@ def _check_arrays(arrays: dict[str, np.ndarray], num_gaits: int, damaged: str) -
         "phase": (), "root_height": (), "root_quat": (4,), "root_lin_vel": (3,), "root_ang_vel": (3,),
         "joint_pos": (_JOINTS,), "joint_vel": (_JOINTS,), "history": (obs_fn.HISTORY, obs_fn.FRAME_DIM),
         "last_reading": (obs_fn.FRAME_DIM,), "action": (_JOINTS,), "targets": (targets.shape[1], _JOINTS),
-    }
+    } | ({"push_force": (3,), "push_steps": ()} if "push_force" in arrays else {})
     for name, trailing in shapes.items():
         values = arrays[name]
         if values.shape != (count, *trailing):

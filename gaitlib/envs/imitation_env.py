@@ -12,7 +12,11 @@ Beyond rsl-rl's contract the environment exposes what switching needs: :attr:`ph
 worlds imitate another gait from a chosen phase, at this moment), :meth:`reset_worlds` and the per-world
 reference :attr:`reference`; and what switch-start training needs (:mod:`gaitlib.envs.handover`):
 :meth:`handover_states` (what a switch would hand over now) and :meth:`hand_over` (continue from such a state),
-which a share of resets use when the environment is given recorded states.
+which a share of resets use when the environment is given recorded states (:mod:`gaitlib.envs.handing`).
+
+A gait description's ``catch`` task (:attr:`EnvConfig.task`) is trained in the same environment: its clip is a
+stance, which the actions are residuals around and the observation shows as a constant reference, and the catch
+reward (:mod:`gaitlib.envs.catch`) replaces the imitation reward.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import torch
 
 from gaitlib.envs import observations as obs_fn
 from gaitlib.envs import rewards as rew_fn
+from gaitlib.envs.catch import CATCH_REWARD, CatchStep, CatchTerm, catch_reward, pd_torque
+from gaitlib.envs.handing import HandingOver
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.envs.randomization import (
     PushConfig,
@@ -36,8 +42,8 @@ from gaitlib.envs.reference import ReferenceFrame, ReferenceTracker
 from gaitlib.envs.rewards import IMITATION_REWARD, RewardTerm
 from gaitlib.envs.terminations import TerminationConfig, any_cause, fall_causes
 from gaitlib.gaits import ReferenceClip
-from gaitlib.rotations import quat_from_yaw, quat_multiply, quat_rotate, quat_rotate_inverse, yaw_of
-from gaitlib.sim import KinematicState, SimBackend, SimState
+from gaitlib.rotations import quat_rotate_inverse
+from gaitlib.sim import SimBackend, SimState
 
 __all__ = ["EnvConfig", "ImitationEnv"]
 
@@ -54,6 +60,11 @@ class EnvConfig:
     """Actions are clipped to +/- this many units before scaling."""
     reward: tuple[RewardTerm, ...] = IMITATION_REWARD
     """Imitation reward terms, weights and scales."""
+    task: str = "imitation"
+    """The task of the gait description trained (:data:`gaitlib.gaits.description.TASKS`): ``imitation`` is
+    rewarded by :attr:`reward`, ``catch`` by :attr:`catch_reward` (:mod:`gaitlib.envs.catch`)."""
+    catch_reward: tuple[CatchTerm, ...] = CATCH_REWARD
+    """The catch task's terms and weights, per second."""
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     """Early termination thresholds."""
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
@@ -74,9 +85,10 @@ class EnvConfig:
     the reward only."""
 
 
-class ImitationEnv:
+class ImitationEnv(HandingOver):
     """N worlds imitating reference clips on a simulation backend; observations as
-    :class:`~gaitlib.envs.observations.ObservationBatch`."""
+    :class:`~gaitlib.envs.observations.ObservationBatch`. The hand-over methods are :class:`~gaitlib.envs.handing.
+    HandingOver`'s."""
 
     def __init__(
         self,
@@ -124,7 +136,7 @@ class ImitationEnv:
         """(N, 3) the trunk's mean acceleration over the last control step, trunk frame, m/s^2, gravity left out:
         what an IMU's accelerometer reads at the control rate once the attitude's gravity is taken away (0 just
         after a reset). Read by the guard's survival estimate (its ``imu`` input), not by the policies."""
-        self._terms = {term.name: torch.zeros(n, device=dev) for term in cfg.reward}
+        self._terms = {t.name: torch.zeros(n, device=dev) for t in self._reward_terms}
         self._obs: obs_fn.ObservationBatch | None = None
         self.reset_worlds(torch.arange(n, device=dev))
 
@@ -136,13 +148,14 @@ class ImitationEnv:
     def step(self, actions: torch.Tensor) -> tuple[obs_fn.ObservationBatch, torch.Tensor, torch.Tensor, dict]:
         cfg = self.cfg
         actions = actions.to(self.device).clamp(-cfg.action_clip, cfg.action_clip)
-        self._action = actions
+        last_action, self._action = self._action, actions
         noise = self._noise(actions.shape, cfg.randomization.action_noise)
         targets = self.reference.joint_pos(self.dt) + cfg.action_scale * actions + noise
         clipped = torch.maximum(torch.minimum(targets, self._upper), self._lower)
         self._targets = torch.cat([clipped.unsqueeze(1), self._targets[:, :-1]], dim=1)
         delay = self._params.action_delay.to(self.device).long()
-        self.backend.set_pd_targets(self._targets[torch.arange(self.num_envs, device=self.device), delay])
+        applied = self._targets[torch.arange(self.num_envs, device=self.device), delay]
+        self.backend.set_pd_targets(applied)
 
         changed = self._pushes.advance()
         if len(changed):
@@ -159,12 +172,20 @@ class ImitationEnv:
 
         observed = self._observed_frames(self.reference)  # now, then the goals: the reward reads now
         ref = observed[0]
-        reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
-        if cfg.contact_penalty:
-            reward = reward - cfg.contact_penalty * state.body_contact.float()
         causes = fall_causes(state.body_contact, state.trunk_contact, state.root_pos[:, 2], state.root_quat,
                              ref.root_quat, cfg.termination)
         terminated = diverged | any_cause(causes)
+        if cfg.task == "catch":
+            p, limit = self._params, self.backend.robot.torque_limit
+            torque = pd_torque(applied, state.joint_pos, state.joint_vel, p.kp.to(self.device), p.kd.to(self.device),
+                               limit=limit)
+            step = CatchStep(state=state, ref=ref, action=actions, last_action=last_action, torque=torque,
+                             terminated=terminated)
+            reward, self._terms = catch_reward(cfg.catch_reward, step, dt=self.dt)
+        else:
+            reward, self._terms = rew_fn.reward(cfg.reward, state, ref)
+        if cfg.contact_penalty:
+            reward = reward - cfg.contact_penalty * state.body_contact.float()
         time_out = (self.episode_length_buf >= self.max_episode_length) & ~terminated
         dones = terminated | time_out
 
@@ -281,55 +302,11 @@ class ImitationEnv:
                 return
         self._obs = self._observations()
 
-    def handover_states(self, world_ids: torch.Tensor) -> dict[str, torch.Tensor]:
-        """What a switch of worlds ``world_ids`` (k,) would hand over now, as the arrays of
-        :class:`~gaitlib.envs.handover.HandoverStates` (k rows each; yaw removed, see there)."""
-        s, ids = self._state, world_ids
-        unturn = quat_from_yaw(-yaw_of(s.root_quat[ids]))
-        return {
-            "source": self.reference.gait[ids],
-            "phase": self.reference.wrapped_phase[ids],
-            "root_height": s.root_pos[ids, 2],
-            "root_quat": quat_multiply(unturn, s.root_quat[ids]),
-            "root_lin_vel": quat_rotate(unturn, s.root_lin_vel[ids]),
-            "root_ang_vel": s.root_ang_vel[ids],
-            "joint_pos": s.joint_pos[ids],
-            "joint_vel": s.joint_vel[ids],
-            "history": self._history[ids],
-            "last_reading": self._last_reading[ids],
-            "action": self._action[ids],
-            "targets": self._targets[ids],
-        }
-
-    def hand_over(self, world_ids: torch.Tensor, states: HandoverStates, phase: torch.Tensor) -> None:
-        """Worlds ``world_ids`` (k,) continue from ``states`` (k rows: another gait's robot, the moment before a
-        switch) under their own gait from ``phase`` (k,), exactly as :meth:`switch` hands a robot over: its body,
-        velocities, observation history, last action and PD targets still under way are kept, and the reference is
-        anchored where it stands and faces. Their dynamics, pushes and episode clock are those of their reset."""
-        dev, k = self.device, len(world_ids)
-
-        def tensor(name: str) -> torch.Tensor:
-            return torch.as_tensor(getattr(states, name), dtype=torch.float32, device=dev)
-
-        root_pos = torch.zeros(k, 3, device=dev)
-        root_pos[:, 2] = tensor("root_height")
-        kinematic = KinematicState(
-            root_pos=root_pos, root_quat=tensor("root_quat"), root_lin_vel=tensor("root_lin_vel"),
-            root_ang_vel=tensor("root_ang_vel"), joint_pos=tensor("joint_pos"), joint_vel=tensor("joint_vel"),
-        )
-        self.backend.reset(world_ids, kinematic)
-        targets = tensor("targets")[:, : self._targets.shape[1]]
-        pad = self._targets.shape[1] - targets.shape[1]  # a shorter recorded delay line: the oldest target repeats
-        self._targets[world_ids] = torch.cat([targets, targets[:, -1:].expand(-1, pad, -1)], 1) if pad else targets
-        self._action[world_ids] = tensor("action")
-        self._history[world_ids] = tensor("history")
-        self._last_reading[world_ids] = tensor("last_reading")
-        self._state = s = self.backend.state()
-        gait = self.reference.gait[world_ids]
-        self.reference.start(world_ids, gait, phase.to(dev), s.root_pos[world_ids], s.root_quat[world_ids])
-        self._obs = self._observations()
-
     # ------------------------------------------------------------------------------------------ internals
+    @property
+    def _reward_terms(self) -> tuple:
+        return self.cfg.catch_reward if self.cfg.task == "catch" else self.cfg.reward
+
     def _randomize(self, world_ids: torch.Tensor) -> None:
         k = len(world_ids)
         params = sample_world_parameters(self.cfg.randomization, k, self._gen)

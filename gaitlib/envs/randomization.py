@@ -143,6 +143,23 @@ class PushSchedule:
         """Draw the magnitudes of pushes that start from now on up to ``force``, N (a training curriculum)."""
         self.cfg = replace(self.cfg, max_force=force)
 
+    def hold(self, world_ids: torch.Tensor, force: torch.Tensor, steps: torch.Tensor) -> None:
+        """Push ``world_ids`` (k,) with ``force`` (k, 3) N, world frame, through the next ``steps`` (k,) control
+        steps (a shove under way when a recorded state was taken, :meth:`under_way`); 0 steps: no push. It ends as
+        a random push ends, whatever the largest random push, and random pushes then follow as after any push."""
+        steps = torch.as_tensor(steps).long()
+        held = steps > 0
+        self.force[world_ids] = torch.where(held.unsqueeze(1), torch.as_tensor(force, dtype=torch.float32), 0.0)
+        self._pushing[world_ids] = held
+        self._steps_left[world_ids] = torch.where(held, steps + 1, self._steps_left[world_ids])  # advance counts 1
+
+    def under_way(self, world_ids: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The push on ``world_ids`` (k,) now, between two control steps: its force (k, 3) N, world frame, and the
+        control steps it still lasts (k,), 0 (and no force) where none is under way: what :meth:`hold` continues."""
+        steps = torch.where(self._pushing[world_ids], self._steps_left[world_ids] - 1, 0).clamp(min=0)
+        pushing = steps > 0
+        return torch.where(pushing.unsqueeze(1), self.force[world_ids], 0.0), steps
+
     def _steps(self, bounds: tuple[float, float], k: int) -> torch.Tensor:
         return torch.round(_uniform(bounds, k, self._gen) / self._dt).long().clamp(min=1)
 
@@ -166,14 +183,15 @@ class PushSchedule:
 
     def advance(self) -> torch.Tensor:
         """Move the timers on by one control step; return the ids of worlds whose force changed."""
-        if self.cfg.max_force <= 0.0:
+        random = self.cfg.max_force > 0.0
+        if not random and not bool(self._pushing.any()):  # no random pushes, no held one (:meth:`hold`)
             return torch.zeros(0, dtype=torch.long)
         self._steps_left -= 1
         due = ((self._steps_left <= 0) & (self.enabled | self._pushing)).nonzero().squeeze(1)
         if len(due) == 0:
             return due
         stop = due[self._pushing[due]]
-        start = due[~self._pushing[due] & self.enabled[due]]
+        start = due[~self._pushing[due] & self.enabled[due]] if random else due[:0]
         self.force[stop] = 0.0
         self._pushing[stop] = False
         self._steps_left[stop] = self._steps(self.cfg.interval, len(stop))
