@@ -152,6 +152,10 @@ def states_command(
     ),
     push_max: float = bounded(0.0, "--push-max", help="Largest random push while the gaits run (0: none);",
                               bounds=PUSH_N),
+    shove_max: float = bounded(0.0, "--shove-max", help="Instead, states 1-3 control steps into single 0.1 s shoves "
+                               "of up to this impulse, uniform from 0 (a quarter unshoved), the push under way kept: "
+                               "what a catch skill is trained from (gaitlib train catch; 0: none);",
+                               bounds=Bounds(low=0, high=200, unit="N s")),
     gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
     worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
     backend: str = typer.Option("auto", "--backend", help="auto, mujoco or newton."),
@@ -159,7 +163,8 @@ def states_command(
     library: Path | None = typer.Option(None, "--library", help="Library folder (default: the shipped library/)."),
 ) -> None:
     """Record handover states of a library's gaits as they run (body, velocities, observation history, previous
-    actions), for switch-start training: gaitlib train GAIT --states OUT."""
+    actions), for switch-start training: gaitlib train GAIT --states OUT; with --shove-max, the states the catch skill
+    is trained from (gaitlib train catch --states OUT)."""
     from rich.console import Console
 
     from gaitlib.cli.options import check_worlds
@@ -172,7 +177,8 @@ def states_command(
     check_worlds("--worlds", worlds, backend=backend)
     lib = Library(library)
     names = lib.order(gaits.split(",") if gaits else None)
-    config = StatesConfig(per_gait=int(per_gait), push_max=push_max, num_worlds=worlds, backend=backend, seed=seed)
+    config = StatesConfig(per_gait=int(per_gait), push_max=push_max, shove_max_ns=shove_max, num_worlds=worlds,
+                          backend=backend, seed=seed)
     console = Console(stderr=True)
     with job_progress(console, "states") as progress:
         task = progress.add_task("states", total=len(names) * config.per_gait, status="")
