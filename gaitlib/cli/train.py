@@ -31,7 +31,8 @@ def _description(gait: str, gait_file: Path | None):
 def train_command(
     ctx: typer.Context,
     gait: str = typer.Argument(
-        ..., help="Gait to train: a shipped description (pace, trot, stand, ...) or --gait-file."
+        ..., help="Gait to train: a shipped description (pace, trot, stand, ..., catch: the catch skill) or "
+        "--gait-file."
     ),
     preset: str = typer.Option(
         "cpu", "--preset",
@@ -59,12 +60,13 @@ def train_command(
         False, "--replace", help="Replace the gait's entry in the shipped library (refused without it)."
     ),
     states: Path | None = typer.Option(
-        None, "--states", help="Handover states of other gaits (gaitlib states) to start a share of episodes from."
+        None, "--states", help="Handover states of other gaits (gaitlib states) to start a share of episodes from "
+        "(a catch task: the states it catches from, every episode, gaitlib states --shove-max)."
     ),
     switch_start: float | None = bounded(
         None, "--switch-start",
         help="Share of episodes that start from a handover state (default: 0.4 with --states, else 0: the paper's "
-        "recipe);", bounds=Bounds(low=0, high=1),
+        "recipe; a catch task's: 1);", bounds=Bounds(low=0, high=1),
     ),
     run_dir: Path | None = typer.Option(None, "--run-dir", help="Checkpoints and TensorBoard logs (runs/GAIT)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from the run's latest checkpoint."),
@@ -156,7 +158,7 @@ def train_command(
         copy_from=copy_from,
         replace=replace,
         states=states,
-        switch_start=switch_start if switch_start is not None else (SWITCH_START if states is not None else 0.0),
+        switch_start=switch_start if switch_start is not None else _switch_start(description, states),
         run_dir=run_dir or Path("runs") / gait,
         backend=backend,
         seed=seed,
@@ -205,6 +207,14 @@ def train_command(
         console.print(f"{target} is your own library, made now as a copy of the shipped {copy_from}", soft_wrap=True)
     _say_status(console, target, gait)
 
+
+
+def _switch_start(description, states: Path | None) -> float:
+    """The default share of episodes started from ``states``: every one for a catch task (it has no reference to
+    start from), :data:`~gaitlib.defaults.SWITCH_START` for a gait with states, none without."""
+    if states is None:
+        return 0.0
+    return 1.0 if description.task == "catch" else SWITCH_START
 
 
 def _interval(text: str) -> tuple[float, float]:

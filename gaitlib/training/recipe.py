@@ -108,7 +108,8 @@ class Recipe:
 
     def env_config(self, cfg: EnvConfig, *, control_dt: float) -> EnvConfig:
         """``cfg`` with this recipe's pushes (off: the curriculum raises them, :meth:`push_limit`), terminations,
-        contact penalty, action delay and cycle sync."""
+        contact penalty, action delay and cycle sync. A catch task's orientation termination is its tilt alone (a
+        catch may turn the robot whichever way it must)."""
         pushes = PushConfig(max_force=0.0)
         if self.push_kind == "kick":
             pushes = PushConfig(max_force=0.0, duration=(control_dt, control_dt), interval=self.kick_interval,
@@ -117,7 +118,7 @@ class Recipe:
         if self.action_delay is not None:
             randomization = dataclasses.replace(randomization, action_delay_steps=(self.action_delay,) * 2)
         return dataclasses.replace(
-            cfg, pushes=pushes, termination=TerminationConfig().counting(self.falls),
+            cfg, pushes=pushes, termination=TerminationConfig().counting(self.falls, heading=cfg.task != "catch"),
             contact_penalty=self.contact_penalty, randomization=randomization, cycle_sync=self.cycle_sync,
             observation=dataclasses.replace(cfg.observation, critic_delay=self.critic_delay),
         )

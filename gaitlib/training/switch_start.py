@@ -41,4 +41,6 @@ def handover_states(path: Path | None, share: float, *, gait: str) -> tuple[Hand
         "recorded_with": {k: used.settings.get(k) for k in ("push_max", "warmup_s", "spacing_s", "num_worlds")},
         "handed_over": "at a uniform destination phase, the reference anchored on the robot (as ImitationEnv.switch)",
     }
+    if used.push_force is not None:  # recorded in single shoves (gaitlib states --shove-max), the push kept
+        record["shoves"] = {k: used.settings.get(k) for k in ("shove_max_ns", "shove_s", "shove_steps", "calm_share")}
     return used, record

@@ -22,6 +22,7 @@ from rsl_rl.runners import OnPolicyRunner
 
 from gaitlib.atomic import release_lock, take_lock, torch_bytes, write_bytes
 from gaitlib.envs import EnvConfig, ImitationEnv
+from gaitlib.envs.catch import CATCH_EPISODE_S
 from gaitlib.envs.handover import HandoverStates
 from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import EvalResult, evaluate_policy
@@ -50,7 +51,7 @@ class TrainRequest:
     """One training run."""
 
     description: GaitDescription
-    """The gait to imitate."""
+    """The gait to imitate, or (its task ``catch``) the catch skill to train from :attr:`states`."""
     preset: TrainPreset
     """Sizes and PPO hyperparameters."""
     iterations: int
@@ -244,6 +245,9 @@ def train_gait(
         request.library, request.description.name, preset=request.preset.name, replace=request.replace,
         copy_from=request.copy_from,
     )
+    if request.description.task == "catch" and request.states is None:
+        raise GaitlibError("a catch task starts its episodes from recorded states: --states FILE (gaitlib states "
+                           "--shove-max 30 records them)")
     states = handover_states(request.states, request.switch_start, gait=request.description.name)  # before any file
     ranks = Ranks.from_env()
     if not ranks.main:
@@ -288,7 +292,9 @@ def _train(
     states, switch_start = handover
     sim = make_backend(backend_name, num_worlds=preset.num_envs, device=rank_device(backend_name, ranks))
     # Pushes start at 0 N: GaitRunner.iterate raises their largest magnitude along the recipe's curriculum.
-    env_cfg = request.recipe.env_config(EnvConfig(episode_seconds=preset.episode_seconds), control_dt=sim.control_dt)
+    task = request.description.task  # a catch's episodes are its own length (gaitlib.envs.catch)
+    seconds = CATCH_EPISODE_S if task == "catch" else preset.episode_seconds
+    env_cfg = request.recipe.env_config(EnvConfig(episode_seconds=seconds, task=task), control_dt=sim.control_dt)
     try:
         env = ImitationEnv(
             sim, [clip], env_cfg, seed=seed, handover=states, handover_share=request.switch_start if states else 0.0
@@ -363,7 +369,7 @@ def _finish(
                 "push_ramp_iterations": preset.push_ramp_iterations(request.iterations),
                 "randomization": dataclasses.asdict(env_cfg.randomization),
                 "distributed": {"world_size": runner.ranks.world_size, "parameters_in_sync": in_sync},
-                "episode_seconds": preset.episode_seconds,
+                "episode_seconds": env_cfg.episode_seconds,
                 "curve": {
                     "columns": ["iteration", "wall_clock_s", "mean_reward", "mean_episode_s"],
                     "rows": _thin_curve(runner.curve),
