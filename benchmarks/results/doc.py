@@ -6,13 +6,15 @@
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
 ``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
 ``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve),
-``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard) and
-``docs/results_history.md`` (the guard before the library grew).
+``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard),
+``docs/results_history.md`` (the guard before the library grew), ``docs/benchmarks.md`` (today's speeds and times)
+and ``README.md`` (the library beside the paper, what runs where).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
-:mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills` and
-:mod:`~benchmarks.results.guard`; how evidence is read and written is :mod:`benchmarks.results.evidence`.
+:mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills`,
+:mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings` and :mod:`~benchmarks.results.overview`; how
+evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
 from __future__ import annotations
@@ -37,10 +39,20 @@ from benchmarks.results.headline import (
     quality_bar,
     routes_table,
 )
+from benchmarks.results.overview import readme_results, runs_where
 from benchmarks.results.robustness import library_table, robustness_table, shove_table
 from benchmarks.results.skills import skills_bar, skills_shoves
 from benchmarks.results.sweep import HELD_OUT, sweep_table
 from benchmarks.results.switches import map_table, switches_table
+from benchmarks.results.timings import (
+    command_start_policy_table,
+    command_start_table,
+    gpu_check_table,
+    gpu_graph_table,
+    guard_cost_table,
+    recipe_speed_table,
+    suite_table,
+)
 from gaitlib.atomic import atomic_path
 
 __all__ = [
@@ -58,14 +70,17 @@ PAGES = {
     "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                   "guard-pairs-menagerie-recover"),
     "results_history": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
+    "benchmarks": ("recipe-speed", "guard-cost", "command-start", "command-start-policy", "suite-latest",
+                   "gpu-check-h100", "gpu-check-graph"),
+    "README": ("readme-results", "runs-where"),
 }
-"""Each results page (``docs/NAME.md``) and its generated blocks, in the page's order."""
+"""Each results page (``docs/NAME.md``; ``README.md`` at the root) and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
 """The guards whose tables the pages show, by the tag of their stored evaluations: the six gaits' (made before the
 library grew, ``docs/results_history.md``) and the shipped library's, grown by the recovery skill (``recover``,
 ``docs/switching.md``)."""
-DOCS = tuple(ROOT / "docs" / f"{page}.md" for page in PAGES)
-"""The results pages, :data:`PAGES` in order."""
+DOCS = tuple(ROOT / f"{page}.md" if page == "README" else ROOT / "docs" / f"{page}.md" for page in PAGES)
+"""The results pages, :data:`PAGES` in order (``README.md`` at the repository's root, the others in ``docs/``)."""
 DOC = DOCS[0]
 """The results page of the current state, ``docs/results.md``."""
 TABLES = tuple(name for names in PAGES.values() for name in names)
@@ -111,7 +126,13 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "guard-curve-recover": guard_curve("recover", Path(evidence_dir).parent / "guard"),
               "guard-summary": guard_summary("recover", Path(evidence_dir).parent / "guard"),
               **{f"guard-pairs-{'' if robot == 'sim' else robot + '-'}recover":
-                 guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES}}
+                 guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES},
+              "recipe-speed": recipe_speed_table(Path(evidence_dir) / "recipe-speed.json"),
+              "guard-cost": guard_cost_table(Path(evidence_dir).parent / "guard" / "guard-cost-recover.json"),
+              "command-start": command_start_table(), "command-start-policy": command_start_policy_table(),
+              "suite-latest": suite_table(), "gpu-check-h100": gpu_check_table(), "gpu-check-graph": gpu_graph_table(),
+              "readme-results": readme_results(evidence_dir, accuracy, Path(evidence_dir).parent / "guard"),
+              "runs-where": runs_where()}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 
