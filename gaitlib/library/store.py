@@ -7,6 +7,8 @@ A library folder holds one entry per gait and the switching models fitted on its
     <library>/switching/tmt.json                             the TMT with the strategies' calibrated thresholds
     <library>/switching/accuracy.json                        how well the net and its input ablation did
     <library>/switching/calibration.json                     the net's score mapped to real success rates
+    <library>/switching/checksums.json                       the SHA-256 of each file of the folder but itself
+    <library>/switching/survival.pt, routes.json             the guard's estimate, the route table (optional)
 
 Each entry and the ``switching`` folder are published whole (:mod:`gaitlib.library.publish`): a reader, or a
 writer killed at any moment, finds the old version or the new one, never neither and never a mix (a net beside
@@ -33,11 +35,12 @@ from pathlib import Path
 
 import torch
 
-from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, read_json, torch_bytes, write_json
+from gaitlib.atomic import CHECKSUM_KEY, file_sha256, json_checksum, torch_bytes, write_json
 from gaitlib.checks import Invalid
 from gaitlib.envs import observations as obs_fn
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.gaits import GaitDescription, clip_from_description
+from gaitlib.library.checksums import listed_checksums, models_identity, write_listed
 from gaitlib.library.deployment import deployment_block
 from gaitlib.library.entry import LibraryEntry, PolicySettings
 from gaitlib.library.export import export_onnx
@@ -63,10 +66,6 @@ __all__ = [
 FORMAT_VERSION = 2
 """Version of the on-disk layout of a library entry; an entry of another version is refused (2: the ``deployment``
 block, and ``policy.onnx`` with a batch axis of any size)."""
-
-
-_CHECKSUMS_FORMAT = {"format": "gaitlib.switching_checksums", "format_version": 1}
-"""Header of ``switching/checksums.json``."""
 
 
 class LibraryError(GaitlibError):
@@ -95,8 +94,8 @@ class Library:
     CHECKSUMS = "checksums.json"
     """The SHA-256 of each of the other files of :attr:`SWITCHING`, checked before any of them is used."""
     SURVIVAL = "survival.pt"
-    """The guard's survival estimate (``gaitlib survival fit``), in :attr:`SWITCHING`: made with the policies it
-    records, so a refit keeps it and it reads as stale once the gaits change (:mod:`gaitlib.strategies.survival`)."""
+    """The guard's survival estimate (``gaitlib survival fit``), in :attr:`SWITCHING`, listed in :attr:`CHECKSUMS`:
+    made with the policies it records, so a refit keeps it and it reads as stale once the gaits change."""
     ROUTES = "routes.json"
     """The route table (``gaitlib routes``), in :attr:`SWITCHING`: measured with the models of :attr:`BUNDLE`, whose
     checksum list it records, so a refit keeps it and it then reads as stale (:mod:`gaitlib.benchmark.routes`)."""
@@ -132,6 +131,18 @@ class Library:
     def check_switching(self) -> None:
         """Refuse, in one line, a library without fitted switching models (with the commands that make them), or
         one whose switching files do not match the checksums written with them (``checksums.json``)."""
+        listed = self.listed_checksums()
+        for name in self.BUNDLE:
+            file = self.switching_dir / name
+            if not file.is_file() or file_sha256(file) != listed.get(name):
+                raise TransitionDataError(
+                    f"{file} is missing or does not match its checksum in {self.switching_dir / self.CHECKSUMS}"
+                )
+
+    def listed_checksums(self) -> dict[str, str]:
+        """File name -> SHA-256 of the switching files as :attr:`CHECKSUMS` lists them (the models, and the survival
+        estimate where there is one: :mod:`gaitlib.library.checksums`); one line for a library without switching
+        models, or without a (sound) list."""
         recover(self.switching_dir)
         if not self.switching_dir.is_dir():
             raise TransitionDataError(
@@ -141,24 +152,23 @@ class Library:
         path = self.switching_dir / self.CHECKSUMS
         if not path.is_file():
             raise TransitionDataError(f"{path} is missing: the switching models are unchecked; run gaitlib fit again")
-        listed = read_json(path, header=_CHECKSUMS_FORMAT, what="a gaitlib checksum list", error=TransitionDataError)
-        for name in self.BUNDLE:
-            file = self.switching_dir / name
-            if not file.is_file() or file_sha256(file) != listed["files"].get(name):
-                raise TransitionDataError(f"{file} is missing or does not match its checksum in {path}")
+        return listed_checksums(path, error=TransitionDataError)
 
     def switching_identity(self) -> str | None:
-        """SHA-256 of the switching models' checksum list, once their files are checked against it (one line if
-        not): what a measurement made with them records; ``None`` for a library without switching models."""
+        """SHA-256 of the switching models' checksum list (the four models': a survival estimate's line changes
+        nothing), once their files are checked against it (one line if not): what a measurement made with them
+        records; ``None`` for a library without switching models."""
         if not self.switching_dir.is_dir():
             return None
         self.check_switching()
-        return file_sha256(self.switching_dir / self.CHECKSUMS)
+        return models_identity(self.listed_checksums(), self.BUNDLE)
 
-    def write_checksums(self, folder: Path) -> Path:
-        """Write ``checksums.json`` into the switching folder being staged at ``folder`` (after the other files)."""
+    def write_checksums(self, folder: Path, *, survival: str | None = None) -> Path:
+        """Write ``checksums.json`` into the switching folder being staged at ``folder`` (after the other files):
+        the SHA-256 of each model there and ``survival``, the one listed for the survival estimate (``None``:
+        none)."""
         files = {name: file_sha256(folder / name) for name in self.BUNDLE}
-        return write_json(folder / self.CHECKSUMS, _CHECKSUMS_FORMAT | {"files": files}, checksum=True)
+        return write_listed(folder / self.CHECKSUMS, files | ({} if survival is None else {self.SURVIVAL: survival}))
 
     def publish_switching(self) -> contextlib.AbstractContextManager[Path]:
         """A staging folder to write the net, TMT, accuracy report and calibration into (names :attr:`NET`,

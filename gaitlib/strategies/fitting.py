@@ -18,7 +18,7 @@ from pathlib import Path
 
 from gaitlib.atomic import write_json
 from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL, Falls
-from gaitlib.errors import TransitionDataError
+from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
 from gaitlib.strategies.calibration import calibrate, save_calibration
@@ -164,11 +164,21 @@ def fit_library(
         save_table(staging / Library.TMT, table)
         write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
-        library.write_checksums(staging)
         for kept in (Library.ROUTES, Library.SURVIVAL):  # made with the old models or policies: kept, so that
             if (library.switching_dir / kept).is_file():  # each reads as stale where it is, never as missing
                 shutil.copy2(library.switching_dir / kept, staging / kept)
+        library.write_checksums(staging, survival=_listed_survival(library) if (staging / Library.SURVIVAL).is_file()
+                                else None)
     return fitted
+
+
+def _listed_survival(library: Library) -> str | None:
+    """The checksum the library's list gives its survival estimate, kept for the estimate a refit keeps (never
+    taken anew from the file: a damaged estimate stays refused); ``None`` where no sound list gives one."""
+    try:
+        return library.listed_checksums().get(Library.SURVIVAL)
+    except GaitlibError:
+        return None
 
 
 def check_validatable(data: TransitionData, *, falls: Falls = DEFAULT_FALLS,
