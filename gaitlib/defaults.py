@@ -6,8 +6,8 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "MIN_PER_LABEL",
-    "SWITCH_START", "Falls",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "MIN_CATCH_WORLDS",
+    "MIN_PER_LABEL", "MIN_UNSHOVED_MINUTES", "SWITCH_START", "Falls",
 ]
 
 COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
@@ -46,3 +46,11 @@ switching models to be written (``gaitlib fit --min-per-label``,
 :func:`gaitlib.strategies.fitting.check_validatable`): the validation set holds a fifth of each label's balanced
 samples (:class:`gaitlib.transition_net.FitConfig`), so at least 5 of each per pair, and a pair's accuracy rests on
 10 held-out switches or more. The shipped fit's rarest label of any pair has 445 samples."""
+MIN_UNSHOVED_MINUTES = 1.0
+"""The least unshoved running, min, of a survival recording's selection split that the guard's margin (or floor) is
+chosen on (:func:`gaitlib.strategies.survival_fit.fit_survival`): its false alarms are counted per minute of it, so
+with less not even one minute is seen. A recording of the default 1024 episodes holds about 3."""
+MIN_CATCH_WORLDS = 4
+"""The fewest worlds per direction of shove (front, left, back, right) a catch is chosen on
+(:func:`gaitlib.benchmark.catches.fit_catch_table`): ``gaitlib survival catches --episodes`` takes at least four times
+as many, and a direction that still reads fewer names no catch."""

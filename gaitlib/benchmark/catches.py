@@ -8,8 +8,9 @@ worlds) and every world switched at once, ``delay`` control steps after its shov
 best destination phase (the calibrated net's, as the guard switches), kept to the episode's end. The worlds are
 sorted by the sector of :data:`~gaitlib.evaluation.SECTORS` their trunk's acceleration points to at the catch
 (:func:`~gaitlib.strategies.survival.shove_sector`, what the guard reads then); in each sector, the gait whose
-catches fell least is the table's, if they fell less than staying did (else that sector has no catch: the guard
-leaves the gait alone when shoved that way). The draws are the caller's ``seed`` (training seeds: never an
+catches fell least is the table's, if they fell less than staying did and the sector read at least
+:data:`~gaitlib.defaults.MIN_CATCH_WORLDS` worlds (else that sector has no catch: the guard leaves the gait alone
+when shoved that way). The draws are the caller's ``seed`` (training seeds: never an
 evaluation's).
 """
 
@@ -21,7 +22,8 @@ from dataclasses import dataclass
 import torch
 
 from gaitlib.benchmark.guarded_push import guarded_push_rollout, shove_episode
-from gaitlib.defaults import DEFAULT_FALLS, Falls
+from gaitlib.defaults import DEFAULT_FALLS, MIN_CATCH_WORLDS, Falls
+from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS, SinglePush, sector_of
 from gaitlib.meta.guard import Guard, GuardReading
 from gaitlib.meta.setup import SwitchingSetup
@@ -90,6 +92,11 @@ class CatchTableConfig:
     backend: str = "mujoco"
     falls: Falls = DEFAULT_FALLS
 
+    def __post_init__(self) -> None:
+        if self.episodes < MIN_CATCH_WORLDS * len(SECTORS):
+            raise GaitlibError(f"{self.episodes} episodes give fewer than {MIN_CATCH_WORLDS} worlds per direction of "
+                               f"shove to choose a catch on: give at least {MIN_CATCH_WORLDS * len(SECTORS)}")
+
 
 def timed_catch_falls(setup: SwitchingSetup, guard: Guard, gait: int, dest: int | None, *, impulse_ns: float,
                       episodes: int, delay_steps: int, seed: int, backend: str,
@@ -133,12 +140,13 @@ def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfi
         row = {}
         for s, counts in by_sector.items():
             best = min((d for d in counts if d != "stay"), key=lambda d: (counts[d], d))
-            if counts[best] < counts["stay"]:
+            if counts[best] < counts["stay"] and worlds[name][s] >= MIN_CATCH_WORLDS:  # never chosen on a handful
                 row[s] = best
         if row:
             catch_into[name] = row
     return {
         "catch_into": catch_into, "falls": falls, "worlds": worlds, "sector_agreement": agreement,
-        "episodes": config.episodes, "impulse_ns": config.impulse_ns, "delay_steps": config.delay_steps,
+        "episodes": config.episodes, "min_worlds": MIN_CATCH_WORLDS,
+        "impulse_ns": config.impulse_ns, "delay_steps": config.delay_steps,
         "seed": config.seed, "falls_definition": Falls(config.falls).value,
     }

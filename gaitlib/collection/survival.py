@@ -249,4 +249,37 @@ def _read(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
         raise GaitlibError(f"{path} is not a recorded survival-state file ({type(error).__name__})") from error
     if header.get("format") != _FORMAT or len({len(v) for v in data.values()}) != 1:
         raise GaitlibError(f"{path} is not a recorded survival-state file")
+    _check_values(path, header, data)
     return header, data
+
+
+_FINITE = ("phase", "latent", "value", "explicit", "imu", "time_s", "shove_s", "impulse_ns", "end_s")
+"""Columns every number of which is finite (``fall_s`` is infinite where the episode never fell; ``offer`` is nan
+where nothing is offered: the gait that runs)."""
+
+
+def _check_values(path: Path, header: dict, data: dict[str, np.ndarray]) -> None:
+    """Refuse, in one line naming the column and the first row, a file whose values no recording writes: a number
+    that is not finite where every one is, a gait index outside the header's gaits, an offer outside [0, 1], a fall
+    that is nan or before the start, a control period that is not a positive number."""
+    gaits = header.get("gaits")
+    dt = header.get("dt")
+    if not isinstance(gaits, list) or not isinstance(dt, float) or not (math.isfinite(dt) and dt > 0):
+        raise GaitlibError(f"{path} is not a recorded survival-state file (its header's gaits or control period)")
+    shapes = {"offer": (len(gaits),), "imu": (3,), "latent": data["latent"].shape[1:2]}
+    if any(data[name].shape[1:] != shape for name, shape in shapes.items() if name in data) or any(
+            data[name].ndim != 1 for name in _COLUMNS if name not in ("latent", "explicit", "imu", "offer")):
+        raise GaitlibError(f"{path} is not a recorded survival-state file (a column of another shape)")
+    with np.errstate(invalid="ignore"):
+        bad = {name: ~np.isfinite(data[name]) for name in _FINITE if name in data}
+        bad["gait"] = (data["gait"] < 0) | (data["gait"] >= len(gaits)) | (data["gait"] != np.floor(data["gait"]))
+        bad["episode"] = data["episode"] < 0
+        bad["fall_s"] = np.isnan(data["fall_s"]) | (data["fall_s"] < 0)
+        bad["offer"] = ~np.isnan(data["offer"]) & ~((data["offer"] >= 0) & (data["offer"] <= 1))
+    for name, wrong in bad.items():
+        if wrong.any():
+            where = tuple(int(i) for i in np.argwhere(wrong)[0])
+            at = f"row {where[0]}" + (f", column {where[1]}" if len(where) > 1 else "")
+            raise GaitlibError(f"{path} holds {name} {data[name][where].item()!r} at {at}, which no recording "
+                               "writes (a number that is not finite, or out of range): refused; record the states "
+                               "again")

@@ -35,7 +35,7 @@ from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS
 from gaitlib.strategies.base import phase_grid
 from gaitlib.strategies.calibration import Calibration
-from gaitlib.strategies.survival import SurvivalEstimate
+from gaitlib.strategies.survival import SurvivalEstimate, check_finite
 from gaitlib.transition_net.model import TransitionNet
 
 __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
@@ -70,7 +70,8 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
                  calibration: Calibration) -> Path:
     """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
     :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
-    ``guard.json``."""
+    ``guard.json``. An estimate that is not finite is refused before anything is written."""
+    check_finite(estimate)
     if tuple(estimate.inputs) not in DEPLOYABLE_INPUTS:
         raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "
                            "latent, phase and imu (the critic's value reads privileged simulator quantities): fit "
