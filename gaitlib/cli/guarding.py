@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import typer
 
+from gaitlib.values import number_text
+
 __all__ = ["choose_guard", "guard_margin_option", "guard_option", "opt_in_guard_option", "print_guard"]
 
 
@@ -33,13 +35,21 @@ def guard_margin_option(*, opt_in: bool = False):
 
 def choose_guard(setup, *, on: bool, margin: float | None, quiet: bool):
     """The library's guard and ``None``, or ``None`` and why the robot runs unguarded (said on stdout unless
-    ``quiet``): ``--no-guard``, or a library without a (fresh) survival estimate."""
+    ``quiet``): ``--no-guard``, or a library without a (fresh) survival estimate. Refused in one line, before any
+    work: ``--guard-margin`` with ``--no-guard`` (it would change nothing), and a damaged estimate (never run
+    around as if there were none)."""
+    from gaitlib.cli.options import OptionError
     from gaitlib.errors import GaitlibError
+    from gaitlib.strategies.survival import SurvivalFileError
 
+    if not on and margin is not None:
+        raise OptionError("--guard-margin has no effect with --no-guard (the robot runs unguarded): leave it out")
     guarding, unguarded = None, None if on else "unguarded (--no-guard)"
     if on:
         try:
             guarding = setup.guard(margin=margin)
+        except SurvivalFileError:
+            raise
         except GaitlibError as why:  # a library fitted before the guard existed, or a stale estimate
             unguarded = f"unguarded: {why}"
     if unguarded and not quiet:
@@ -55,5 +65,5 @@ def print_guard(report: dict, guarding, trace) -> None:
         print(f"guard caught {catch['from']} -> {catch['to']} at {catch['time_s']:.2f} s (staying {catch['stay']:.3f}, "
               f"switching {catch['offer']:.3f}); {catch['requested']} ran again {back}")
     if guarding is not None:
-        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
+        print(f"guard on (margin {number_text(guarding.margin)}, horizon {number_text(guarding.horizon_s)} s): "
               f"{len(trace.catches)} catch(es)")

@@ -10,14 +10,19 @@ import typer
 
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
-from gaitlib.defaults import Falls
-from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, OptionError, parse_values
+from gaitlib.defaults import MIN_CATCH_WORLDS, MIN_UNSHOVED_MINUTES, Falls
+from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, OptionError, number_text, parse_values
 
 __all__ = ["app", "guarded_curve"]
 
 app = typer.Typer(help="The guard's survival estimate: record states before falls and survivals, fit it.")
 
-_LIBRARY = typer.Option(None, "--library", help="Library folder (default: the shipped library/).")
+_LIBRARY = typer.Option(None, "--library", help="Library to read (default: $GAITLIB_LIBRARY, else the shipped "
+                        "library/).")
+_CATCH_EPISODES = Bounds(low=4 * MIN_CATCH_WORLDS, high=COUNT.high, whole=True)
+"""``survival catches --episodes``: enough worlds for each of the four directions of shove."""
+_WRITTEN = typer.Option(None, "--library", help="Library to write into (default: $GAITLIB_LIBRARY, else your own "
+                        "runs/library, made from the shipped one on its first write; one rule for every writer).")
 
 
 @app.command("record")
@@ -55,9 +60,11 @@ def record_command(
 @app.command("fit")
 def fit_command(
     data: Path = typer.Argument(..., help="A state file of gaitlib survival record."),
-    horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5]: "
-                                 "START:STOP:STEP or a list."),
-    margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1)."),
+    horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5] and "
+                                 "at least one control step: START:STOP:STEP or a list."),
+    margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1) "
+                                        f"(chosen on at least {MIN_UNSHOVED_MINUTES:g} unshoved minute(s) of the "
+                                        "selection split otherwise)."),
     floor: str = typer.Option("0", "--floor", help="Below this estimate the guard catches whatever the margin, in "
                               "[0, 1) (0: never), or auto: the highest of 0-0.5 with at most 0.1 false alarms per "
                               "unshoved minute on the selection split (docs/switching.md, \"The guard\")."),
@@ -66,19 +73,18 @@ def fit_command(
                                "exportable to a robot), explicit."),
     epochs: int = bounded(20, "--epochs", help="Training epochs;", bounds=COUNT),
     seed: int = bounded(0, "--seed", help="Split and training seed;", bounds=SEED),
-    library: Path | None = typer.Option(
-        None, "--library", help="Library to write the estimate into (default: $GAITLIB_LIBRARY, else your own "
-        "runs/library, made from the shipped one on its first write)."
-    ),
-    replace: bool = typer.Option(False, "--replace", help="Write into the shipped library (refused without it)."),
+    library: Path | None = _WRITTEN,
+    replace: bool = typer.Option(False, "--replace", help="Write into a protected library (refused without it)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as one JSON object."),
 ) -> None:
     """Fit the survival estimate on recorded states, calibrate it, choose the guard's horizon and margin on a
-    held-out split, write it into the library's switching folder and report it."""
+    held-out split, write it into the library's switching folder and report it (the library held for the whole run:
+    a second writer of it is refused; a catch table the old estimate held is dropped)."""
     from gaitlib.collection.survival import read_survival_states
     from gaitlib.library import Library
-    from gaitlib.library.target import check_writable, copy_library, library_writer, writing_target
+    from gaitlib.library.target import copy_library, library_writer
     from gaitlib.strategies.survival import check_guard, fit_survival, save_survival
+    from gaitlib.strategies.survival_fit import check_fit
 
     chosen = parse_values(horizons, option="--horizons", bounds=GUARD_HORIZON_S, example="0.5:1.5:0.5")
     try:
@@ -86,24 +92,26 @@ def fit_command(
     except ValueError:
         raise OptionError(f"--floor must be a number in [0, 1) or auto, got '{floor}'") from None
     check_guard(margin=margin, floor=chosen_floor)
-    target, copy_from = writing_target(library)
-    check_writable(target, replace=replace, command="gaitlib survival fit", what="the survival estimate")
-    header, states = read_survival_states(data)
+    target, copy_from = _writing(library, replace=replace, command="gaitlib survival fit", what="the survival estimate")
+    header, states = read_survival_states(data)  # a foreign file, a number no recording writes: refused here
     Library(copy_from or target).check_identities(header["identities"], what=f"survival states {data}")
-    estimate = fit_survival(states, gaits=tuple(header["gaits"]), identities=header["identities"], dt=header["dt"],
-                            inputs=tuple(i.strip() for i in inputs.split(",")), horizons_s=chosen, margin=margin,
-                            floor=chosen_floor, epochs=epochs, seed=seed)
+    options = {"inputs": tuple(i.strip() for i in inputs.split(",")), "horizons_s": chosen, "margin": margin,
+               "floor": chosen_floor, "seed": seed}
+    check_fit(states, dt=header["dt"], **options)  # estimates chosen on too little: refused before the copy
     if copy_from is not None:
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib survival fit"):
+        estimate = fit_survival(states, gaits=tuple(header["gaits"]), identities=header["identities"],
+                                dt=header["dt"], epochs=epochs, **options)
         path = save_survival(Library(target), estimate, data=data)
     report = estimate.info["report"]
     if as_json:
         print(json_text({"path": str(path), "horizon_s": estimate.horizon_s, "margin": estimate.margin,
-                         "floor": estimate.floor} | estimate.info))
+                         "margin_given": margin is not None, "floor": estimate.floor} | estimate.info))
         return
-    print(f"{path}: horizon {estimate.horizon_s:g} s, margin {estimate.margin:g} (chosen on the selection split), "
-          f"floor {estimate.floor:g}" + (" (chosen there too)" if chosen_floor is None else ""))
+    how = "given" if margin is not None else "chosen on the selection split"
+    print(f"{path}: horizon {number_text(estimate.horizon_s)} s, margin {number_text(estimate.margin)} ({how}), "
+          f"floor {number_text(estimate.floor)}" + (" (chosen there too)" if chosen_floor is None else ""))
     print("reliability (selection split): predicted -> observed (states)")
     for row in report["reliability"]:
         print(f"  {row['bin'][0]:.1f}-{row['bin'][1]:.1f}: {row['predicted']:.3f} -> {row['observed']:.3f} "
@@ -118,7 +126,8 @@ def fit_command(
 
 @app.command("catches")
 def catches_command(
-    episodes: int = bounded(256, "--episodes", help="Worlds per running gait and catch gait;", bounds=COUNT),
+    episodes: int = bounded(256, "--episodes", help="Worlds per running gait and catch gait (at least "
+                            f"{MIN_CATCH_WORLDS} per direction of shove);", bounds=_CATCH_EPISODES),
     impulse: float = bounded(18.0, "--impulse", help="The shove;", bounds=IMPULSE_NS),
     delay: int = bounded(2, "--delay", help="Control steps from the shove's start to the catch;",
                          bounds=Bounds(low=0, high=30, whole=True)),
@@ -126,32 +135,38 @@ def catches_command(
                         bounds=SEED),
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
     falls: str = falls_option(),
-    library: Path | None = _LIBRARY,
-    replace: bool = typer.Option(False, "--replace", help="Write into the shipped library (refused without it)."),
+    library: Path | None = _WRITTEN,
+    replace: bool = typer.Option(False, "--replace", help="Write into a protected library (refused without it)."),
     as_json: bool = typer.Option(False, "--json", help="Print the table as one JSON object."),
 ) -> None:
     """Measure where the guard catches each gait to and write it into the library's survival estimate: every gait
     shoved once, caught --delay steps later into each other gait in turn; in each direction of shove, the one that
-    fell least is its catch where it fell less than staying (docs/switching.md, "The guard")."""
+    fell least is its catch where it fell less than staying (docs/switching.md, "The guard"). The library is held
+    for the whole run: a refit of the estimate meanwhile is refused."""
+    from gaitlib.atomic import file_sha256
     from gaitlib.benchmark.catches import CatchTableConfig, fit_catch_table
-    from gaitlib.library.target import check_writable, library_writer
+    from gaitlib.library import Library
+    from gaitlib.library.target import copy_library, library_writer
     from gaitlib.meta import load_switching
     from gaitlib.strategies.survival import save_catch_table
 
-    setup = load_switching(library)
-    guard = setup.guard()  # no survival estimate, or a stale one: one line, before any work
-    root = setup.resources.library.root
-    check_writable(root, replace=replace, command="gaitlib survival catches", what="the catch table")
     config = CatchTableConfig(impulse_ns=impulse, episodes=episodes, delay_steps=delay, seed=seed, backend=backend,
                               falls=falls)
-    table = fit_catch_table(setup, guard, config,
-                            progress=lambda d, t: print(f"{d}/{t} rollouts", file=sys.stderr, flush=True))
-    with library_writer(root, command="gaitlib survival catches"):
-        path = save_catch_table(setup.resources.library, table)
+    target, copy_from = _writing(library, replace=replace, command="gaitlib survival catches", what="the catch table")
+    load_switching(copy_from or target).guard()  # no survival estimate, a stale or damaged one: one line, no work
+    if copy_from is not None:
+        copy_library(copy_from, target)
+    with library_writer(target, command="gaitlib survival catches"):
+        measured = file_sha256(Library(target).switching_dir / Library.SURVIVAL)
+        setup = load_switching(target)
+        table = fit_catch_table(setup, setup.guard(), config,
+                                progress=lambda d, t: print(f"{d}/{t} rollouts", file=sys.stderr, flush=True))
+        path = save_catch_table(setup.resources.library, table, measured=measured)
     if as_json:
         print(json_text(table))
         return
-    print(f"{path}: falls at {impulse:g} N s by the sector the trunk is pushed toward, and the catch chosen (*)")
+    print(f"{path}: falls at {number_text(impulse)} N s by the sector the trunk is pushed toward, and the catch chosen "
+          "(*)")
     for gait, by_sector in table["falls"].items():
         into = table["catch_into"].get(gait, {})
         for sector, row in by_sector.items():
@@ -166,14 +181,31 @@ def export_command(
 ) -> None:
     """Export the guard for a robot-side loop: the policies' latents, the survival estimate and the transition-net
     as ONNX, with calibrations, horizon, margin and candidates in guard.json (docs/deploying.md)."""
+    from gaitlib.cli.preflight import writable_folder
     from gaitlib.meta import load_switching
     from gaitlib.strategies.guard_export import export_guard
 
+    writable_folder("--out", out)  # a file there, or a folder that cannot be written: one line, before any work
     setup = load_switching(library)
-    guard = setup.guard()  # no survival estimate, or a stale one: one line, before anything is written
+    guard = setup.guard()  # no survival estimate, or a stale or damaged one: one line, before anything is written
     path = export_guard(out, policies=[e.policy for e in setup.entries], estimate=guard.estimate,
                         net=setup.resources.net, calibration=setup.resources.calibration)
-    print(f"{path} (and the ONNX files beside it): horizon {guard.horizon_s:g} s, margin {guard.margin:g}")
+    print(f"{path} (and the ONNX files beside it): horizon {number_text(guard.horizon_s)} s, margin "
+          f"{number_text(guard.margin)}")
+
+
+def _writing(library: Path | None, *, replace: bool, command: str, what: str) -> tuple[Path, Path | None]:
+    """(the library ``command`` writes ``what`` into, the library to copy there first) by the one rule of every
+    writer of a library (:mod:`gaitlib.library.target`), refused in one line before any work where it is protected
+    without ``replace``, held by another writer, not a library, or without (sound) switching models."""
+    from gaitlib.cli.preflight import writing_library
+    from gaitlib.library import Library
+    from gaitlib.library.target import check_library
+
+    target, copy_from = writing_library(library, replace=replace, command=command, what=what)
+    check_library(copy_from or target, command=command)
+    Library(copy_from or target).check_switching()  # the estimate is published with the switching models' list
+    return target, copy_from
 
 
 def guarded_curve(gait: str, library: Path | None, impulses, margin: float | None, *, record: bool, episodes: int,
@@ -216,9 +248,9 @@ def guarded_curve(gait: str, library: Path | None, impulses, margin: float | Non
 
     from gaitlib.cli.tables import table_console
 
-    table = Table(title=f"{gait} on the meta-controller, guard on (margin {guarding.margin:g}, horizon "
-                        f"{guarding.horizon_s:g} s) and off on the same draws: falls ({falls} definition) under one "
-                        f"push of 0.1 s per episode ({episodes} episodes each, 95% interval)")
+    table = Table(title=f"{gait} on the meta-controller, guard on (margin {number_text(guarding.margin)}, "
+                        f"horizon {number_text(guarding.horizon_s)} s) and off on the same draws: falls ({falls} "
+                        f"definition) under one push of 0.1 s per episode ({episodes} episodes each, 95% interval)")
     for column in ("impulse N s", "falls unguarded", "falls guarded", "worst sector guarded", "catches",
                    "false catches", "delay steps (median)", f"{gait} running"):
         table.add_column(column, justify="right")
@@ -254,8 +286,8 @@ def _guarded_pushes(setup, gait: str, guarding, *, episodes: int, seconds: float
     on, off = runs["guarded"], runs["unguarded"]
     print(f"eval {gait} on the meta-controller: {episodes} episodes x {seconds:g} s, pushes <= {push_max:g} N, "
           f"falls ({falls} definition): unguarded {rate_text(off['fall_rate'], off['ci95'])}"
-          f", guarded {rate_text(on['fall_rate'], on['ci95'])} (margin {guarding.margin:g}, horizon "
-          f"{guarding.horizon_s:g} s)")
+          f", guarded {rate_text(on['fall_rate'], on['ci95'])} (margin {number_text(guarding.margin)}, "
+          f"horizon {number_text(guarding.horizon_s)} s)")
     print(f"guard: {len(on['guard']['catches'])} catch(es), {on['catches_per_min']:.3f} per minute of running; "
           f"{gait} ran {100 * on['guard']['measured_gait_share']:.1f}% of the time")
     for c in on["guard"]["catches"]:

@@ -98,6 +98,9 @@ def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
     """Load every entry of ``library`` (a :class:`Library`, a folder, or ``None`` for the default library) for
     switching, gaits in the canonical order the transition data, TMT and net use."""
     lib = library if isinstance(library, Library) else Library(library)
+    if not lib.root.is_dir():  # a file, or nothing: no library at all, not one of no gaits
+        what = "is a file, not a library folder" if lib.root.exists() else "does not exist"
+        raise GaitlibError(f"library {lib.root} {what}")
     names = lib.gaits()
     if len(names) < 2:
         raise GaitlibError(f"library {lib.root} holds {len(names)} gait(s); switching needs at least two")
