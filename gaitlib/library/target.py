@@ -1,5 +1,5 @@
-"""Where a command that writes a library writes, and whether it may: ``gaitlib train``, ``fit``, ``routes`` and
-``eval --record`` follow one rule.
+"""Where a command that writes a library writes, and whether it may: ``gaitlib train``, ``fit``, ``routes``,
+``eval --record``, ``survival fit`` and ``survival catches`` follow one rule.
 
 Nothing a user runs rewrites the shipped library by accident (Isaac Lab, mjlab and legged_gym likewise never write
 over what they ship: a run writes its own output, and the user chooses what to use):
@@ -101,8 +101,8 @@ def copy_library(source: Path, destination: Path) -> Path:
 @contextlib.contextmanager
 def library_writer(library: Path, *, command: str) -> Iterator[None]:
     """Hold ``library``'s writer lock while the block runs: a second writer (``gaitlib fit``, ``routes``, ``train``'s
-    publishing, ``eval --record``) is refused in one line while one runs; the kernel frees the lock however the
-    holder ends."""
+    publishing, ``eval --record``, ``survival fit``, ``survival catches``) is refused in one line while one runs; the
+    kernel frees the lock however the holder ends."""
     lock = Path(library) / WRITER_LOCK  # take_lock makes the folder of a library's first write
     fd = take_lock(lock, writing=_writing(library, command), error=GaitlibError)
     try:
