@@ -96,7 +96,8 @@ def test_the_new_fields_are_optional_and_recorded_only_when_they_move(tmp_path) 
         assert GaitDescription(**desc.record()) == desc
     trot = get_gait("trot")
     assert "lateral_speed" not in trot.record() and "yaw_rate" not in trot.record()
-    new = ("lateral_speed", "yaw_rate")
+    new = ("lateral_speed", "yaw_rate", "task")  # each recorded only where it is not its default
+    assert get_gait("catch").record()["task"] == "catch"
     assert trot.record() == {k: v for k, v in dataclasses.asdict(trot).items() if k not in new}
     assert get_gait("trot_left").record()["yaw_rate"] == 0.5
     assert GaitDescription(**trot.record()) == trot  # an old record reads back as lateral_speed = yaw_rate = 0
