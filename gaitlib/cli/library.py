@@ -8,6 +8,7 @@ import typer
 
 from gaitlib.atomic import json_text
 from gaitlib.defaults import DEFAULT_FALLS
+from gaitlib.values import number_text
 
 __all__ = ["library_command"]
 
@@ -71,8 +72,8 @@ def library_command(
         if routes["fix"]:
             console.print(f"  fix: {escape(routes['fix'])}", soft_wrap=True)
     if survival is not None and survival["state"] == "current":
-        console.print(f"survival estimate (the guard): horizon {survival['horizon_s']:g} s, margin "
-                      f"{survival['margin']:g}, inputs {', '.join(survival['inputs'])}", soft_wrap=True)
+        console.print(f"survival estimate (the guard): horizon {number_text(survival['horizon_s'])} s, margin "
+                      f"{number_text(survival['margin'])}, inputs {', '.join(survival['inputs'])}", soft_wrap=True)
     elif survival is not None:
         console.print(f"problem: {escape(survival['why'])}", soft_wrap=True)
     other = status.other_falls()
@@ -111,14 +112,14 @@ def _survival(lib, status) -> dict | None:
     """The library's survival estimate (``gaitlib survival fit``): ``None`` without one, else its state, and its
     horizon, margin and inputs when it is current."""
     from gaitlib.errors import GaitlibError
-    from gaitlib.strategies.survival import SURVIVAL_FILE, load_survival
+    from gaitlib.strategies.survival import SURVIVAL_FILE, SurvivalFileError, load_survival
 
     if status.bundle is None or not (lib.switching_dir / SURVIVAL_FILE).is_file():
         return None
     try:
         estimate = load_survival(lib, status.bundle.gaits)
-    except GaitlibError as stale:  # recorded with other policies, or damaged
-        return {"state": "stale", "why": str(stale)}
+    except GaitlibError as stale:  # recorded with other policies, or damaged (refused by every command using it)
+        return {"state": "damaged" if isinstance(stale, SurvivalFileError) else "stale", "why": str(stale)}
     return {"state": "current", "horizon_s": estimate.horizon_s, "margin": estimate.margin,
             "floor": estimate.floor, "inputs": list(estimate.inputs)}
 
