@@ -75,7 +75,7 @@ def test_fit_choose_save_load(recorded, switching_library, tmp_path):
     identities = library.identities(setup.gaits)
     dt = read_survival_states(path)[0]["dt"]
     estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, horizons_s=(0.2, 0.4), epochs=2,
-                            floor=None)  # the floor chosen too (by default none: 0)
+                            floor=None, min_unshoved_minutes=0)  # the floor chosen too (by default none: 0)
     report = estimate.info["report"]
     assert estimate.horizon_s in (0.2, 0.4) and 0 <= estimate.margin < 1 and estimate.floor in FLOORS
     assert report["floor"] == estimate.floor and report["floor_false_alarms_per_min"] <= FALSE_ALARMS_PER_MIN
@@ -130,7 +130,7 @@ def test_the_imu_input_is_recorded_and_fitted_and_an_older_file_is_refused_for_i
     identities = Library(setup.resources.library.root).identities(setup.gaits)
     dt = read_survival_states(path)[0]["dt"]
     estimate = fit_survival(data, gaits=setup.gaits, identities=identities, dt=dt, inputs=("latent", "phase", "imu"),
-                            horizons_s=(0.2,), epochs=2)
+                            horizons_s=(0.2,), epochs=2, min_unshoved_minutes=0)
     assert estimate.inputs == ("latent", "phase", "imu") and estimate.armed_from_s == pytest.approx(0.3)
     older = tmp_path / "older.h5"  # as recorded before the column existed
     with h5py.File(path, "r") as source, h5py.File(older, "w") as copy:

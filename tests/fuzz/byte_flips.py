@@ -2,8 +2,9 @@
 its files with their checksums kept valid; read each back the way the commands do, and count what happened.
 
 A small library (two gaits, the tests' tiny preset), its switching models, a small transition file, a small benchmark
-result, a handover-states file and a route table (from a second small benchmark, of both pairs) are made in a
-temporary folder. Then, for each kind of file, ``--flips`` times: one byte is XOR-ed with a random non-zero value,
+result, a handover-states file, a route table (from a second small benchmark, of both pairs) and a survival estimate
+(read as the guard of ``run``, ``drive`` and ``eval --guard``) are made in a temporary folder. Then, for each kind
+of file, ``--flips`` times: one byte is XOR-ed with a random non-zero value,
 the file is read as the commands read it, and the outcome is counted:
 
 - ``refused``: one :class:`~gaitlib.errors.GaitlibError` line (the file is named, nothing is used);
@@ -30,9 +31,9 @@ file a run was started from, each read by the run's resume (refused, unless the 
 subset, a collection with the same seed, ...), where every outcome but ``harmless`` (each sample counted once) is
 a failure.
 
-Usage: python tests/fuzz/byte_flips.py [--flips 100] [--edits 100] [--seed 0]; prints one JSON line per kind of
-file and per kind of edited file, and exits non-zero if any flip or edit was accepted with a different result or
-crashed. ``--flips 0`` or ``--edits 0`` (the default) skips that part.
+Usage: python tests/fuzz/byte_flips.py [--flips 100] [--edits 100] [--seed 0] [--only KIND]; prints one JSON line
+per kind of file and per kind of edited file, and exits non-zero if any flip or edit was accepted with a different
+result or crashed. ``--flips 0`` or ``--edits 0`` (the default) skips that part; ``--only`` flips one kind alone.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ from gaitlib.library import Library
 from gaitlib.meta import TrialProtocol, load_switching
 from gaitlib.strategies import SwitchResources
 from gaitlib.strategies.fitting import fit_library
+from gaitlib.strategies.survival import SurvivalEstimate, SurvivalNet, save_survival
 from gaitlib.training import get_preset
 from gaitlib.training.trainer import TrainRequest, train_gait
 from gaitlib.transitions import read, read_all, schema
@@ -102,6 +104,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         strategies=("random",), magnitudes=(0.0,), samples=2, num_worlds=2, backend="mujoco",
         protocol=TrialProtocol(warmup_s=0.3, source_extra_s=0.2, horizon_s=0.5, deadline_s=0.3, push_lead_s=0.2)))
     routes_from_results(both, Library(library), strategy="random").save(Library(library))
+    _save_estimate(Library(library), data)
     start_resumable_run(root, Path(gaits.__file__).parent / "descriptions" / "stand.toml")  # the shipped stand
     probe = ObservationBatch(policy=torch.linspace(-1, 1, 159).unsqueeze(0), privileged=torch.zeros(1, 14))
 
@@ -124,6 +127,13 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
     def overlapping() -> object:
         return read_all([data, copy]).samples.columns()
 
+    def guard() -> object:  # as run, drive and eval --guard read it
+        estimate = load_switching(library).guard().estimate
+        features = torch.linspace(-1, 1, int(estimate.net.mean.numel())).unsqueeze(0)
+        return (estimate.gaits, estimate.identities, estimate.inputs, estimate.horizon_s, estimate.margin,
+                estimate.floor, estimate.platt, estimate.info, estimate.net.state_dict(),
+                estimate.probability(features, torch.zeros(1, dtype=torch.long)).numpy())
+
     part = next(schema.parts_folder(data).glob("part-*.h5"))
     switching_dir = library / "switching"
     return {
@@ -135,6 +145,7 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         "switching calibration.json": (switching_dir / "calibration.json", switching),
         "switching accuracy.json": (switching_dir / "accuracy.json", switching),
         "switching checksums.json": (switching_dir / "checksums.json", switching),
+        "switching survival.pt": (switching_dir / "survival.pt", guard),
         "transition index": (data, transitions),
         "transition part": (part, transitions),
         "benchmark results.json": (out / "results.json", lambda: load_results(out)),
@@ -144,6 +155,18 @@ def build(root: Path) -> dict[str, tuple[Path, Callable[[], object]]]:
         "data overlap: a copy's index": (copy, overlapping),
         "data overlap: a copy's part": (next(schema.parts_folder(copy).glob("part-*.h5")), overlapping),
     }
+
+
+def _save_estimate(library: Library, data: Path) -> None:
+    """A survival estimate (untrained, its guard settings and catch table set) saved as ``gaitlib survival fit``
+    saves one, into ``library``."""
+    gaits = library.gaits()
+    dim = len(gaits) + 2 + library.entry(gaits[0]).policy.latent_dim  # one-hot gait, psi_m, phase as sin, cos
+    estimate = SurvivalEstimate(gaits, library.identities(gaits), ("latent", "phase"), 0.5, 0.05,
+                                {0: (1.2, -0.3), 1: (0.8, 0.1)}, SurvivalNet(dim),
+                                {"armed_from_s": 0.5, "catches": {"catch_into": {"trot": {"left": "stand"}}}}, 0.1)
+    torch.manual_seed(0)
+    save_survival(library, estimate, data=data)
 
 
 def same(a: object, b: object) -> bool:
@@ -189,6 +212,7 @@ def main() -> None:
     parser.add_argument("--flips", type=int, default=100, help="flips per kind of file (0: none)")
     parser.add_argument("--edits", type=int, default=0, help="structured edits per kind of file (0: none)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--only", default=None, help="flip only this kind of file (e.g. 'switching survival.pt')")
     args = parser.parse_args()
     rng, bad = random.Random(args.seed), 0
     with tempfile.TemporaryDirectory() as scratch:
@@ -196,6 +220,8 @@ def main() -> None:
         kinds = build(root)
         if args.flips:
             for kind, (path, reader) in kinds.items():
+                if args.only is not None and kind != args.only:
+                    continue
                 counts = flip(path, reader, args.flips, rng)
                 bad += counts["different"] + counts["crashed"]
                 print(json.dumps({"file": kind, "bytes": path.stat().st_size, "flips": args.flips, **counts}),

@@ -24,7 +24,8 @@ def test_no_flipped_byte_or_edited_field_is_used_silently() -> None:
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert done.returncode == 0, done.stderr
     flips, edits = [x for x in lines if "flips" in x], [x for x in lines if "edits" in x]
-    assert len(flips) == 16 and {line["file"].split()[0] for line in flips} >= {"entry", "switching", "transition"}
+    assert len(flips) == 17 and {line["file"].split()[0] for line in flips} >= {"entry", "switching", "transition"}
+    assert "switching survival.pt" in {line["file"] for line in flips}
     assert {line["file"] for line in flips} >= IDENTITY_FLIPS
     for line in flips:
         assert line["different"] == 0 and line["crashed"] == 0, line
