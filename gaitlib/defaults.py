@@ -6,13 +6,17 @@ from __future__ import annotations
 from enum import StrEnum
 
 __all__ = [
-    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "MIN_CATCH_WORLDS",
-    "MIN_PER_LABEL", "MIN_UNSHOVED_MINUTES", "SWITCH_START", "Falls",
+    "BAR_FALLS", "BAR_HEADING_DEG", "BAR_SPEED", "COMPARED", "DEFAULT_FALLS", "DEFAULT_STRATEGY", "MAX_RUN_SECONDS",
+    "MIN_CATCH_WORLDS", "MIN_PER_LABEL", "MIN_UNSHOVED_MINUTES", "SWITCH_START", "Falls",
 ]
 
 COMPARED = ("random", "value", "tmt", "tmt-value", "net", "net-lookahead")
 """The switching strategies ``gaitlib benchmark`` compares by default: the paper's Fig. 4 baselines, its rule
 (``net``) and the calibrated net (``net-lookahead``)."""
+MAX_RUN_SECONDS = 600.0
+"""The longest one robot is simulated by ``gaitlib run`` (its request time and, for each gait requested, the
+switch's deadline and the hold after it: the longest the run can take) or ``gaitlib drive`` (its last command's
+time), s: ten minutes, as the longest evaluation episode; a longer one is refused before it starts."""
 DEFAULT_STRATEGY = "net-lookahead"
 """The strategy ``gaitlib run`` and :func:`gaitlib.meta.run_episode` switch with by default: the best measured on
 the shipped library (``docs/results.md``); ``net`` is the paper's rule."""

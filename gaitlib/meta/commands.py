@@ -10,21 +10,28 @@ over (forward, lateral, yaw rate x :data:`TURN_RADIUS_M`): the yaw rate becomes 
 from __future__ import annotations
 
 import csv
-import itertools
+import io
 import math
+import os
+import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gaitlib.defaults import MAX_RUN_SECONDS
 from gaitlib.errors import GaitlibError
 from gaitlib.gaits.description import GaitDescription
-from gaitlib.robots.a1.constants import HIP_OFFSETS, THIGH_OFFSET_Y
+from gaitlib.robots.a1.constants import CONTROL_HZ, HIP_OFFSETS, THIGH_OFFSET_Y
+from gaitlib.values import number_text
 
 __all__ = [
     "COMMAND_HEADER",
+    "MAX_INPUT_BYTES",
+    "MAX_WAYPOINT_M",
     "RANGE_BOUND",
+    "STRAIGHT_ON",
     "TURN_RADIUS_M",
     "WAYPOINT_HEADER",
     "Commands",
@@ -53,8 +60,18 @@ none of them)."""
 STRAIGHT = 0.05
 """A skill's lateral speed (m/s) and yaw rate (rad/s) at most this count as none: it goes straight (or turns in
 place, for forward and lateral speeds), as the quality bar's tolerance for a zero reference."""
-MAX_SECONDS = 600.0
-"""The longest drive, s (as ``gaitlib run``'s times)."""
+STRAIGHT_ON = math.radians(1.0)
+"""A turn toward the next waypoint of at most this is not made, rad: the robot goes straight on to the point of its
+heading nearest the waypoint, which it passes at most sin(1 degree), 1.75%, of the leg's length aside, and the next
+leg starts from there (a turn in place of 1 degree at 1 rad/s lasts half a control step)."""
+MAX_WAYPOINT_M = 1000.0
+"""The farthest a waypoint may lie from the first, where the robot starts, m."""
+MAX_INPUT_BYTES = 1 << 20
+"""The largest command timeline or waypoint list read, bytes (1 MiB: some 40,000 rows, beyond any drive of
+:data:`~gaitlib.defaults.MAX_RUN_SECONDS`); only this much of a larger file is read before it is refused."""
+MAX_VALUE = 1e6
+"""The largest size of any number of a command timeline or waypoint list (times, speeds, coordinates are refused
+far below it): a larger one is refused as it is read, before any arithmetic on it."""
 
 
 @dataclass(frozen=True)
@@ -80,8 +97,9 @@ class Commands:
         pose = np.zeros(3)
         for i, (forward, lateral, yaw_rate) in enumerate(self.velocity):
             start, stop = self.time_s[i], self.time_s[i + 1]
-            inside = (t > start) & (t <= stop)
-            poses[inside] = [_advance(pose, forward, lateral, yaw_rate, s - start) for s in t[inside]]
+            inside = (t > start) & (t <= stop)  # none where the command is shorter than a step: it only moves on
+            for row in np.flatnonzero(inside):
+                poses[row] = _advance(pose, forward, lateral, yaw_rate, t[row] - start)
             pose = _advance(pose, forward, lateral, yaw_rate, stop - start)
         poses[(t > self.end_s) | (t == t[-1])] = pose
         return poses
@@ -118,9 +136,9 @@ def nearest_skills(commands: Commands, skills: Sequence[Skill]) -> tuple[list[st
     for i in np.flatnonzero(nearest > RANGE_BOUND)[:1]:
         forward, lateral, yaw_rate = commands.velocity[i]
         raise GaitlibError(
-            f"the command at {commands.time_s[i]:g} s (forward {forward:g} m/s, lateral {lateral:g} m/s, yaw rate "
-            f"{yaw_rate:g} rad/s) is beyond every skill of the library: the nearest, {skills[chosen[i]].name}, is "
-            f"{nearest[i]:.3f} m/s away, more than {RANGE_BOUND:g}"
+            f"the command at {number_text(commands.time_s[i])} s (forward {number_text(forward)} m/s, lateral "
+            f"{number_text(lateral)} m/s, yaw rate {number_text(yaw_rate)} rad/s) is beyond every skill of the "
+            f"library: the nearest, {skills[chosen[i]].name}, is {nearest[i]:.3f} m/s away, more than {RANGE_BOUND:g}"
         )
     return [skills[k].name for k in chosen], nearest
 
@@ -134,14 +152,14 @@ def read_commands(path: Path) -> Commands:
         raise GaitlibError(f"{path}: a command timeline needs at least two rows, a command and the end of the drive")
     times = rows[:, 0]
     if times[0] != 0.0:
-        raise GaitlibError(f"{path}: the first command is at {times[0]:g} s; the drive starts with it at 0 s")
+        raise GaitlibError(f"{path}: the first command is at {number_text(times[0])} s; the drive starts with it at "
+                           "0 s")
     back = np.flatnonzero(np.diff(times) <= 0)
     if len(back):
         k = int(back[0]) + 1
-        raise GaitlibError(f"{path}: times must increase, but row {k + 1} ({times[k]:g} s) does not come after "
-                           f"row {k} ({times[k - 1]:g} s)")
-    if times[-1] > MAX_SECONDS:
-        raise GaitlibError(f"{path}: the drive ends at {times[-1]:g} s, longer than {MAX_SECONDS:g} s")
+        raise GaitlibError(f"{path}: times must increase, but row {k + 1} ({number_text(times[k])} s) does not come "
+                           f"after row {k} ({number_text(times[k - 1])} s)")
+    _check_length(times[-1], f"{path}: the drive ends at {number_text(times[-1])} s")
     return Commands(time_s=times.copy(), velocity=rows[:-1, 1:].copy())
 
 
@@ -156,8 +174,11 @@ def read_waypoints(path: Path) -> np.ndarray:
     if len(same):
         k = int(same[0]) + 2
         raise GaitlibError(f"{path}: waypoint {k} is where waypoint {k - 1} is (within 1 mm)")
-    if np.abs(points).max() > 1000.0:
-        raise GaitlibError(f"{path}: a waypoint lies more than 1000 m from the start")
+    far = np.linalg.norm(points - points[0], axis=1)
+    if far.max() > MAX_WAYPOINT_M:
+        k = int(far.argmax())
+        raise GaitlibError(f"{path}: waypoint {k + 1} lies {far[k]:.1f} m from the first, where the robot starts; "
+                           f"the farthest a drive goes is {MAX_WAYPOINT_M:g} m")
     return points
 
 
@@ -165,33 +186,49 @@ def waypoint_commands(points: np.ndarray, skills: Sequence[Skill]) -> Commands:
     """The command timeline that drives from ``points[0]`` (facing +x) through each later point, open loop: at
     each point turn in place toward the next with the fastest skill that turns in place that way (the other way
     round if the library turns only the other way), then go straight to it with the slowest skill that goes straight
-    ahead. One line if the library has no such skill."""
+    ahead. A turn of at most :data:`STRAIGHT_ON` is not made: the leg goes straight on to the point of the heading
+    nearest the next waypoint, and the next leg starts from where the plan is, so that the commanded path passes
+    every waypoint within sin(1 degree) of its leg's length and no skipped turn adds up. One line if the library has
+    no such skill."""
     ahead = [s for s in skills if s.velocity[0] > STRAIGHT and max(abs(s.velocity[1]), abs(s.velocity[2])) <= STRAIGHT]
     turners = [s for s in skills if abs(s.velocity[2]) > STRAIGHT and max(map(abs, s.velocity[:2])) <= STRAIGHT]
     if not ahead:
         raise GaitlibError("waypoints need a skill that goes straight ahead; the library holds none")
     forward = min(ahead, key=lambda s: s.velocity[0]).velocity
-    times, velocities, heading = [0.0], [], 0.0
-    for k, (start, end) in enumerate(itertools.pairwise(points)):
-        step = end - start
+    times, velocities = [0.0], []
+    position, heading = np.asarray(points[0], dtype=float), 0.0  # where the plan is, and its heading
+    for k, end in enumerate(points[1:], start=1):
+        step = end - position
+        length = float(np.linalg.norm(step))
         turn = math.remainder(math.atan2(step[1], step[0]) - heading, 2 * math.pi)
-        if abs(turn) > math.radians(1.0):
-            spin = _turner(turners, turn, point=k + 1)
+        if abs(turn) > STRAIGHT_ON:
+            spin = _turner(turners, turn, point=k)
             angle = turn if math.copysign(1.0, turn) == math.copysign(1.0, spin[2]) else turn - math.copysign(
                 2 * math.pi, turn)
             times.append(times[-1] + angle / spin[2])
             velocities.append(spin)
-        heading += turn
-        times.append(times[-1] + float(np.linalg.norm(step)) / forward[0])
+            heading += angle
+        else:
+            length *= math.cos(turn)  # straight on, to the point of this heading nearest the waypoint
+        times.append(times[-1] + length / forward[0])
         velocities.append(forward)
-    if times[-1] > MAX_SECONDS:
-        raise GaitlibError(f"the waypoints take {times[-1]:.0f} s to drive, longer than {MAX_SECONDS:g} s")
+        position = position + length * np.array([math.cos(heading), math.sin(heading)])
+    _check_length(times[-1], f"the waypoints take {times[-1]:.3g} s to drive")
     return Commands(time_s=np.array(times), velocity=np.array(velocities, dtype=float))
+
+
+def _check_length(end_s: float, drive: str) -> None:
+    """Refuse a drive ending at ``end_s`` (``drive`` says so, e.g. ``the drive ends at 700 s``) that is longer
+    than :data:`~gaitlib.defaults.MAX_RUN_SECONDS` or holds no control step, before any work."""
+    if end_s > MAX_RUN_SECONDS:
+        raise GaitlibError(f"{drive}, longer than the longest run, {MAX_RUN_SECONDS:g} s")
+    if round(end_s / (1.0 / CONTROL_HZ)) < 1:  # the steps a drive runs (gaitlib.meta.episode.drive_episode)
+        raise GaitlibError(f"{drive}, less than half a control step (1/{CONTROL_HZ:g} s): there is nothing to drive")
 
 
 def _turner(turners: list[Skill], turn: float, *, point: int) -> tuple[float, float, float]:
     if not turners:
-        raise GaitlibError(f"the waypoints turn {math.degrees(turn):.0f} degrees at waypoint {point}; the library "
+        raise GaitlibError(f"the waypoints turn {math.degrees(turn):.3g} degrees at waypoint {point}; the library "
                            "holds no skill that turns in place")
     same_way = [s for s in turners if s.velocity[2] * turn > 0]
     return max(same_way or turners, key=lambda s: abs(s.velocity[2])).velocity
@@ -212,19 +249,16 @@ def _advance(pose: np.ndarray, forward: float, lateral: float, yaw_rate: float, 
 
 def _read(path: Path, header: tuple[str, ...], *, what: str) -> np.ndarray:
     """The rows of CSV file ``path`` with exactly ``header``, as finite floats; one line otherwise."""
+    reader = csv.reader(io.StringIO(_text(path, what), newline=""))
     try:
-        with open(path, newline="") as file:
-            reader = csv.reader(file)
-            lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
-    except (OSError, UnicodeDecodeError) as error:
-        raise GaitlibError(f"{path}: cannot be read as {what} ({error.__class__.__name__})") from None
+        lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
     except csv.Error as error:
         raise GaitlibError(f"{path}: not a CSV file ({error})") from None
     if not lines:
         raise GaitlibError(f"{path} is empty; {what} has the header {','.join(header)} and its rows")
     found = tuple(cell.strip() for cell in lines[0][1])
     if found != header:
-        raise GaitlibError(f"{path}: the header is '{','.join(found)}'; {what} needs '{','.join(header)}'")
+        raise GaitlibError(f"{path}: the header is '{_shown(','.join(found))}'; {what} needs '{','.join(header)}'")
     rows = []
     for number, row in lines[1:]:
         if len(row) != len(header):
@@ -232,8 +266,43 @@ def _read(path: Path, header: tuple[str, ...], *, what: str) -> np.ndarray:
         try:
             values = [float(cell) for cell in row]
         except ValueError:
-            raise GaitlibError(f"{path}: line {number} is not numbers: '{','.join(row)}'") from None
+            raise GaitlibError(f"{path}: line {number} is not numbers: '{_shown(','.join(row))}'") from None
         if not all(math.isfinite(v) for v in values):
             raise GaitlibError(f"{path}: line {number} holds a value that is not finite: '{','.join(row)}'")
+        for cell, value in zip(row, values, strict=True):
+            if abs(value) > MAX_VALUE:
+                raise GaitlibError(f"{path}: line {number} holds {cell.strip()}, larger than any drive takes (at most "
+                                   f"{MAX_VALUE:.0f} in size)")
         rows.append(values)
     return np.array(rows, dtype=float).reshape(-1, len(header))
+
+
+_KINDS = {stat.S_ISDIR: "a folder", stat.S_ISFIFO: "a named pipe", stat.S_ISCHR: "a device", stat.S_ISBLK: "a device",
+          stat.S_ISSOCK: "a socket"}
+
+
+def _text(path: Path, what: str) -> str:
+    """The text of ``path``, a regular file of at most :data:`MAX_INPUT_BYTES` in UTF-8 (a byte order mark at its
+    start is dropped): a pipe or a device is refused before it is opened, and a larger file after reading one byte
+    more than the limit, so that neither can hang the command or fill its memory."""
+    try:
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):
+            kind = next((name for test, name in _KINDS.items() if test(mode)), "not a regular file")
+            raise GaitlibError(f"{path} is {kind}; {what} is read from a regular file")
+        with open(path, "rb") as file:
+            data = file.read(MAX_INPUT_BYTES + 1)
+    except OSError as error:
+        raise GaitlibError(f"{path}: cannot be read as {what} ({error.__class__.__name__})") from None
+    if len(data) > MAX_INPUT_BYTES:
+        raise GaitlibError(f"{path} is larger than {MAX_INPUT_BYTES >> 20} MiB, more than {what} of any drive holds")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise GaitlibError(f"{path}: cannot be read as {what} (UnicodeDecodeError: not UTF-8 text)") from None
+
+
+def _shown(text: str) -> str:
+    """``text`` as a message shows it: characters that print as nothing or look like others (a byte order mark, a
+    zero-width space, a control character) written as escapes, ``\\ufeff``."""
+    return text if text.isprintable() else "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)

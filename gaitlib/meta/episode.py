@@ -11,7 +11,7 @@ from itertools import pairwise
 import numpy as np
 import torch
 
-from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY, Falls
+from gaitlib.defaults import DEFAULT_FALLS, DEFAULT_STRATEGY, MAX_RUN_SECONDS, Falls
 from gaitlib.envs import EnvConfig, ImitationEnv
 from gaitlib.envs.randomization import DISTURBANCE_LEAD_S
 from gaitlib.envs.terminations import TerminationConfig
@@ -22,7 +22,7 @@ from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.meta.trials import SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
 from gaitlib.sim import make_backend
 
-__all__ = ["RunTrace", "drive_episode", "run_episode"]
+__all__ = ["RunTrace", "check_run_length", "drive_episode", "run_episode"]
 
 
 @dataclass
@@ -114,6 +114,19 @@ class RunTrace:
         return [event.step * self.dt for event in self.switches]
 
 
+def check_run_length(*, request_s: float, requests: int, hold_s: float, deadline_s: float = DEADLINE_S) -> None:
+    """Refuse a run (:func:`run_episode`) of ``requests`` gaits requested in turn that can last longer than
+    :data:`~gaitlib.defaults.MAX_RUN_SECONDS`: its first request at ``request_s``, then for each gait the switch's
+    deadline and the hold after it."""
+    longest = request_s + requests * (deadline_s + hold_s)
+    if longest > MAX_RUN_SECONDS:
+        raise GaitlibError(
+            f"a run of {requests} request(s) can last {longest:.6g} s (the first request at {request_s:g} s, then for "
+            f"each gait the switch's deadline of {deadline_s:g} s and the hold of {hold_s:g} s), longer than the "
+            f"longest run, {MAX_RUN_SECONDS:g} s"
+        )
+
+
 def run_episode(
     setup: SwitchingSetup,
     *,
@@ -152,6 +165,7 @@ def run_episode(
             f"pushes' lead before a request ({lead_s:g} s)"
         )
     pairs = list(pairwise(gaits))
+    check_run_length(request_s=request_s, requests=len(pairs), hold_s=hold_s, deadline_s=deadline_s)
     # Each trial's verdict horizon ends where the next request's push lead begins; the last one's lead is run below.
     protocol = TrialProtocol(
         warmup_s=request_s, source_extra_s=0.0, horizon_s=hold_s - lead_s, deadline_s=deadline_s,
@@ -223,6 +237,9 @@ def drive_episode(
     try:
         cfg = EnvConfig(episode_seconds=end_s + 1.0, termination=TerminationConfig().counting(falls))
         env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
+        if round(end_s / env.dt) < 1:
+            raise GaitlibError(f"a drive of {end_s:g} s is shorter than half a control step ({env.dt:.4g} s): there "
+                               "is nothing to drive")
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed, guard=guard)
         env.reset_worlds(torch.zeros(1, dtype=torch.long, device=env.device),
                          gait=torch.full((1,), gaits[0], dtype=torch.long, device=env.device))
