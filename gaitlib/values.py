@@ -39,16 +39,23 @@ class Bounds:
         text = f"{'(' if self.low_open else '['}{number_text(self.low)}, {number_text(self.high)}]"
         return f"{text} {self.unit}" if self.unit else text
 
-    def check(self, option: str, value: float | None) -> float | None:
-        """``value`` if it lies in the range (``None`` passes: an unset optional option); else :class:`OptionError`."""
+    def check(self, option: str, value: float | None, *, given: str | None = None) -> float | None:
+        """``value`` if it lies in the range (``None`` passes: an unset optional option); else :class:`OptionError`
+        naming it in full (``given``, the text it was read from, where that is not a finite number: ``1e400``)."""
         if value is None:
             return None
         number = float(value) if isinstance(value, float) or abs(value) < 1e300 else math.inf * (value > 0 or -1)
         above = number > self.low if self.low_open else number >= self.low
         if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
-            kind = "a whole number" if self.whole else "a finite number"
-            raise OptionError(f"{option} must be {kind} in {self.describe()}, got {number_text(number)}")
+            shown = str(value) if isinstance(value, int) else number_text(number)  # 2**70 in full, not 1.18e+21
+            if given is not None and not math.isfinite(number):
+                shown = given.strip()  # 1e400 as given, not as the inf it reads as
+            raise OptionError(f"{option} must be {self.kind()} in {self.describe()}, got {shown}")
         return value
+
+    def kind(self) -> str:
+        """What a value must be, as the errors write it: ``a whole number`` or ``a finite number``."""
+        return "a whole number" if self.whole else "a finite number"
 
 
 def number_text(value: float) -> str:

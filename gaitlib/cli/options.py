@@ -32,6 +32,7 @@ __all__ = [
     "WORLDS",
     "WORLD_BYTES",
     "Bounds",
+    "Number",
     "OptionError",
     "action_delay_option",
     "bounded",
@@ -75,13 +76,39 @@ CHUNK = Bounds(low=1, high=1e7, whole=True)
 
 
 def bounded(default, *names: str, help: str, bounds: Bounds):
-    """A typer option ``names`` whose help ends with its range and whose value is checked by ``bounds`` at parse
-    time."""
+    """A typer option ``names`` whose help ends with its range and whose value is read by :class:`Number` and
+    checked by ``bounds`` at parse time."""
 
     def check(param: typer.CallbackParam, value):
         return bounds.check(param.opts[0], value)
 
-    return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check)
+    return typer.Option(default, *names, help=f"{help} {bounds.describe()}.", callback=check,
+                        parser=Number(names[0], bounds), metavar="INTEGER" if bounds.whole else "FLOAT")
+
+
+class Number:
+    """The parser of option ``option``'s number as given: a whole number (``4294967295``, ``2e6``) as an ``int``
+    where ``bounds`` take only whole numbers, any other as a ``float``. Text that is not a number, and a number out
+    of ``bounds`` (``2.5`` for a count), is refused in gaitlib's one line (:class:`OptionError`), as the option's
+    range is, not with click's usage message of several lines."""
+
+    def __init__(self, option: str, bounds: Bounds) -> None:
+        self.option, self.bounds = option, bounds
+
+    def __call__(self, value):
+        if not isinstance(value, str):  # a default, already a number
+            return value
+        option = self.option
+        try:
+            number: float = int(value)  # a whole number exactly, however large
+        except ValueError:
+            try:
+                number = float(value)
+            except ValueError:
+                raise OptionError(f"{option} must be {self.bounds.kind()} in {self.bounds.describe()}, got "
+                                  f"'{value}'") from None
+        self.bounds.check(option, number, given=value)
+        return int(number) if self.bounds.whole else float(number)
 
 
 _FALLS_HELP = (
