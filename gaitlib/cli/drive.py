@@ -50,7 +50,7 @@ def drive_command(
 
     if (commands is None) == (waypoints is None):
         raise OptionError("gaitlib drive takes one of --commands FILE.csv or --waypoints FILE.csv")
-    plot_and_video(plot, video)
+    plot_and_video(plot, video, inputs={"--commands": commands, "--waypoints": waypoints}, library=library)
     points = read_waypoints(waypoints) if waypoints is not None else None
     timeline = read_commands(commands) if commands is not None else None
     check_guard(margin=guard_margin)

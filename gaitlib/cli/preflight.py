@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import importlib.util
 import os
-from collections.abc import Iterable
+import tempfile
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import typer
@@ -18,7 +19,9 @@ import typer
 from gaitlib.cli.options import OptionError
 
 __all__ = [
+    "apart",
     "given",
+    "library_input",
     "needs_module",
     "no_effect",
     "plot_and_video",
@@ -55,8 +58,8 @@ def no_effect(ctx: typer.Context, names: Iterable[str], *, when: bool, because: 
 
 def writable_file(option: str, path: Path) -> Path:
     """``path`` if a file can be written there: a name that is not empty and not a folder, in a folder that exists
-    and can be written, or can be made (its nearest existing parent a writable folder); one line otherwise. Nothing
-    is created."""
+    and can be written, or can be made (its nearest existing parent a writable folder, tried by making a file or a
+    folder there and removing it); one line otherwise. Nothing is left behind."""
     if not str(path).strip() or path.is_dir():
         raise OptionError(f"{option} must name a file, got '{path}'" + (" (a folder)" if path.is_dir() else ""))
     _creatable(option, path.parent, of=path)
@@ -65,20 +68,65 @@ def writable_file(option: str, path: Path) -> Path:
 
 def writable_folder(option: str, path: Path, *, what: str = "a folder") -> Path:
     """``path`` if it is a writable folder, or one that can be made; one line naming ``what`` otherwise (``--library
-    x`` that is a file: ``--library x is a file, not a library folder``). Nothing is created."""
+    x`` that is a file: ``--library x is a file, not a library folder``). Nothing is left behind."""
     if path.exists() and not path.is_dir():
         raise OptionError(f"{option} {path} is a file, not {what}")
     _creatable(option, path, of=path)
     return path
 
 
-def plot_and_video(plot: Path, video: Path | None) -> None:
-    """``--plot`` and ``--video`` (when given) writable, and the packages ``--video`` needs installed (``gaitlib
-    run``, ``drive``)."""
+def plot_and_video(plot: Path, video: Path | None, *, inputs: Mapping[str, Path | None] | None = None,
+                   library: Path | None = None) -> None:
+    """``--plot`` and ``--video`` (when given) writable, apart from each other, from the command's input files
+    ``inputs`` and from the ``library`` it reads (``None``: the default one) (:func:`apart`), and the packages
+    ``--video`` needs installed (``gaitlib run``, ``drive``)."""
+    apart({"--plot": plot, "--video": video}, files=inputs or {}, folders=library_input(library))
     writable_file("--plot", plot)
     if video is not None:
         writable_file("--video", video)
         needs_module("--video", ("imageio", "imageio_ffmpeg"), install="pip install 'gaitlib[video]'")
+
+
+def apart(outputs: Mapping[str, Path | None], *, files: Mapping[str, Path | None],
+          folders: Mapping[str, Path | None]) -> None:
+    """Refuse an output (option -> path; ``None``: not written) that would overwrite one of the command's input
+    ``files`` or ``folders`` (option, or a description such as ``the library``, -> its path), lie inside an input
+    folder, or be another output: paths compared as the file system resolves them (the working folder, ``..``,
+    symbolic links; a hard link to an existing input too)."""
+    seen: dict[str, str] = {}
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        where = os.path.realpath(path)
+        for source, read in {**files, **folders}.items():
+            if read is None:
+                continue
+            if _same(path, read):
+                raise OptionError(f"{option} {path} is the input {source} {read}: writing it would replace what the "
+                                  f"command reads; give {option} another path")
+            if source in folders and Path(where).is_relative_to(os.path.realpath(read)):
+                raise OptionError(f"{option} {path} lies in {source} {read}, which the command reads; give "
+                                  f"{option} a path outside it")
+        if where in seen:
+            raise OptionError(f"{seen[where]} and {option} both name {path}; give each its own path")
+        seen[where] = option
+
+
+def library_input(library: Path | None) -> dict[str, Path]:
+    """The library a command reads (``--library``, or the default one) as an input folder of :func:`apart`."""
+    from gaitlib.library.layout import default_library_dir
+
+    return {"--library": library} if library is not None else {"the library": default_library_dir()}
+
+
+def _same(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file: one resolved path, or one file on disk (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist: not the same
+        return False
 
 
 def writing_library(library: Path | None, *, replace: bool, command: str, what: str) -> tuple[Path, Path | None]:
@@ -102,8 +150,20 @@ def _creatable(option: str, folder: Path, *, of: Path) -> None:
         existing = existing.parent
     if not existing.is_dir():
         raise OptionError(f"{option} {of} cannot be written: {existing} is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
+    if not os.access(existing, os.W_OK | os.X_OK) or not _tried(existing):
         raise OptionError(f"{option} {of} cannot be written: the folder {existing} is not writable")
+
+
+def _tried(folder: Path) -> bool:
+    """Whether a file can be made in ``folder``, tried (a file system that refuses what its permissions allow:
+    ``/proc``, a read-only mount for root), the file removed at once."""
+    try:
+        handle, name = tempfile.mkstemp(prefix=".gaitlib-try-", dir=folder)
+    except OSError:
+        return False
+    os.close(handle)
+    os.unlink(name)
+    return True
 
 
 def needs_module(option: str, modules: Iterable[str], *, install: str) -> None:

@@ -70,14 +70,15 @@ def run_command(
     from gaitlib.cli.preflight import plot_and_video
     from gaitlib.cli.routes import route_table
     from gaitlib.meta import load_switching
-    from gaitlib.meta.episode import run_episode
+    from gaitlib.meta.episode import check_run_length, run_episode
     from gaitlib.meta.trace_plot import plot_trace
     from gaitlib.strategies.survival import check_guard
 
     sequence = [g.strip() for g in dests.split(",")]
     if "" in sequence:
         raise OptionError(f"--to takes gait names separated by commas, got '{dests}'")
-    plot_and_video(plot, video)
+    check_run_length(request_s=request_at, requests=len(sequence), hold_s=hold)
+    plot_and_video(plot, video, library=library)
     check_guard(margin=guard_margin)
     setup = load_switching(library)
     guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)
