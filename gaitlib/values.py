@@ -9,7 +9,10 @@ from dataclasses import dataclass
 
 from gaitlib.errors import GaitlibError
 
-__all__ = ["GUARD_HORIZON_S", "IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "number_text", "parse_values"]
+__all__ = [
+    "GUARD_HORIZON_S", "GUARD_MARGIN", "IMPULSE_NS", "MAX_MAGNITUDES", "Bounds", "OptionError", "number_text",
+    "parse_values",
+]
 
 MAX_MAGNITUDES = 1000
 """Most push magnitudes one benchmark sweeps (the paper's sweep has 11)."""
@@ -33,10 +36,13 @@ class Bounds:
     """Only whole numbers (counts, seeds)."""
     low_open: bool = False
     """``low`` itself is refused (durations that must be positive)."""
+    high_open: bool = False
+    """``high`` itself is refused (a margin below 1)."""
 
     def describe(self) -> str:
-        """The range as the help and the errors write it, e.g. ``[0, 2000] N`` or ``(0, 600] s``."""
-        text = f"{'(' if self.low_open else '['}{number_text(self.low)}, {number_text(self.high)}]"
+        """The range as the help and the errors write it, e.g. ``[0, 2000] N``, ``(0, 600] s`` or ``[0, 1)``."""
+        text = (f"{'(' if self.low_open else '['}{number_text(self.low)}, {number_text(self.high)}"
+                f"{')' if self.high_open else ']'}")
         return f"{text} {self.unit}" if self.unit else text
 
     def check(self, option: str, value: float | None, *, given: str | None = None) -> float | None:
@@ -46,7 +52,8 @@ class Bounds:
             return None
         number = float(value) if isinstance(value, float) or abs(value) < 1e300 else math.inf * (value > 0 or -1)
         above = number > self.low if self.low_open else number >= self.low
-        if not (math.isfinite(number) and above and number <= self.high and (number.is_integer() or not self.whole)):
+        below = number < self.high if self.high_open else number <= self.high
+        if not (math.isfinite(number) and above and below and (number.is_integer() or not self.whole)):
             shown = str(value) if isinstance(value, int) else number_text(number)  # 2**70 in full, not 1.18e+21
             if given is not None and not math.isfinite(number):
                 shown = given.strip()  # 1e400 as given, not as the inf it reads as
@@ -65,6 +72,8 @@ def number_text(value: float) -> str:
     return str(int(value)) if math.isfinite(value) and value.is_integer() and abs(value) < 1e15 else repr(value)
 
 
+GUARD_MARGIN = Bounds(low=0, high=1, high_open=True)
+"""The guard's margin: how much more, in survival probability, another gait must offer than staying."""
 IMPULSE_NS = Bounds(low=0, high=200, unit="N s")
 """Impulses of a single push (200 N s: 16 m/s of speed change for the A1, beyond anything it survives)."""
 

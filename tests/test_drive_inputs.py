@@ -189,6 +189,9 @@ def test_values_are_named_as_given_and_a_huge_one_is_refused_without_warnings(tm
         (["eval", "stand", "--seconds", "1e400"], "--seconds must be a finite number in (0, 600] s, got 1e400"),
         (["drive", "--seed", "0.5"], "--seed must be a whole number in [0, 4294967295], got 0.5"),
         (["run", "--action-delay", "1.5"], "--action-delay must be a whole number in [0, 10], got 1.5"),
+        (["run", "--guard-margin", "abc"], "--guard-margin must be a finite number in [0, 1), got 'abc'"),
+        (["drive", "--guard-margin", "1"], "--guard-margin must be a finite number in [0, 1), got 1"),
+        (["survival", "fit", "x.npz", "--margin", "-0.1"], "--margin must be a finite number in [0, 1), got -0.1"),
     ],
 )
 def test_a_number_option_given_what_it_does_not_take_is_one_line(args, line) -> None:

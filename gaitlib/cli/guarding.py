@@ -26,11 +26,14 @@ def opt_in_guard_option(help: str):
 def guard_margin_option(*, opt_in: bool = False):
     """``--guard-margin``: the guard's margin instead of the library's; ``opt_in`` for a command whose guard is off
     unless asked for (:func:`opt_in_guard_option`)."""
+    from gaitlib.cli.options import bounded
+    from gaitlib.values import GUARD_MARGIN
+
     if opt_in:
-        return typer.Option(None, "--guard-margin", help="With --guard: the guard's margin, in [0, 1) (default: the "
-                            "one chosen with the survival estimate).")
-    return typer.Option(None, "--guard-margin", help="The guard's margin, in [0, 1) (default: the one chosen with "
-                        "the library's survival estimate).")
+        return bounded(None, "--guard-margin", help="With --guard: the guard's margin (default: the one chosen with "
+                       "the survival estimate);", bounds=GUARD_MARGIN)
+    return bounded(None, "--guard-margin", help="The guard's margin (default: the one chosen with the library's "
+                   "survival estimate);", bounds=GUARD_MARGIN)
 
 
 def choose_guard(setup, *, on: bool, margin: float | None, quiet: bool):

@@ -11,7 +11,7 @@ import typer
 from gaitlib.atomic import json_text
 from gaitlib.cli.options import COUNT, SEED, WORLDS, Bounds, bounded, falls_option
 from gaitlib.defaults import MIN_CATCH_WORLDS, MIN_UNSHOVED_MINUTES, Falls
-from gaitlib.values import GUARD_HORIZON_S, IMPULSE_NS, OptionError, number_text, parse_values
+from gaitlib.values import GUARD_HORIZON_S, GUARD_MARGIN, IMPULSE_NS, OptionError, number_text, parse_values
 
 __all__ = ["app", "guarded_curve"]
 
@@ -62,9 +62,9 @@ def fit_command(
     data: Path = typer.Argument(..., help="A state file of gaitlib survival record."),
     horizons: str = typer.Option("0.5,1,1.5", "--horizons", help="Horizons to choose from, s, each in (0, 5] and "
                                  "at least one control step: START:STOP:STEP or a list."),
-    margin: float | None = typer.Option(None, "--margin", help="Use this margin instead of choosing it, in [0, 1) "
-                                        f"(chosen on at least {MIN_UNSHOVED_MINUTES:g} unshoved minute(s) of the "
-                                        "selection split otherwise)."),
+    margin: float | None = bounded(None, "--margin", help="Use this margin instead of choosing it (chosen on at "
+                                   f"least {MIN_UNSHOVED_MINUTES:g} unshoved minute(s) of the selection split "
+                                   "otherwise);", bounds=GUARD_MARGIN),
     floor: str = typer.Option("0", "--floor", help="Below this estimate the guard catches whatever the margin, in "
                               "[0, 1) (0: never), or auto: the highest of 0-0.5 with at most 0.1 false alarms per "
                               "unshoved minute on the selection split (docs/switching.md, \"The guard\")."),
