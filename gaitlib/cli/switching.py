@@ -26,6 +26,7 @@ from gaitlib.cli.options import (
     workers_option,
 )
 from gaitlib.defaults import COMPARED, DEFAULT_STRATEGY, Falls
+from gaitlib.values import number_text
 
 __all__ = ["benchmark_command", "run_command"]
 
@@ -270,7 +271,7 @@ def benchmark_command(
         return
     _print_summary(facts, out, plot, falls)
     if config.guard:
-        print(f"guard on (margin {guarding.margin:g}, horizon {guarding.horizon_s:g} s): "
+        print(f"guard on (margin {number_text(guarding.margin)}, horizon {number_text(guarding.horizon_s)} s): "
               + "; ".join(f"{key}: {g['catches']} catch(es) {g['by_pair']}" for key, g in catches.items()))
     else:
         print("guard off (--guard turns it on)")
