@@ -29,6 +29,13 @@ __all__ = [
     "KP_RANGE",
     "LEG_NAMES",
     "LINK_LENGTH",
+    "MIRROR_AXIAL",
+    "MIRROR_JOINTS",
+    "MIRROR_JOINT_SIGNS",
+    "MIRROR_LEGS",
+    "MIRROR_PART_SIGNS",
+    "MIRROR_QUAT",
+    "MIRROR_VECTOR",
     "MJCF_PATH",
     "NUM_JOINTS",
     "NUM_LEGS",
@@ -88,3 +95,28 @@ KD_DEFAULT: float = 1.35  # choice: middle of KD_RANGE
 CONTROL_HZ: float = 30.0  # paper: policy rate, Hz
 SUBSTEPS: int = 8  # choice: physics steps per control step
 PHYSICS_DT: float = 1.0 / (CONTROL_HZ * SUBSTEPS)  # 1/240 s, as in the MJCF <option timestep>
+
+# Left-right symmetry: the reflection y -> -y of the trunk frame (its x-z plane), which maps the A1 onto itself
+# (facts: HIP_OFFSETS and THIGH_OFFSET_Y differ in the sign of y alone between a leg and its mirror, and so do the
+# MJCF's leg bodies, their inertial frames and their joint ranges; a1.xml). Not quite: the trunk's centre of mass sits
+# 4.1 mm to the left (y = 0.0041 m) and its inertia has small products (a1.xml's trunk <inertial>, from Unitree's
+# URDF), which the reflection moves to the right; a mirrored policy meets that difference.
+MIRROR_VECTOR: tuple[float, float, float] = (1.0, -1.0, 1.0)
+"""Signs that reflect a vector (a position, velocity, force, gravity) in the x-z plane: y negated."""
+MIRROR_AXIAL: tuple[float, float, float] = (-1.0, 1.0, -1.0)
+"""Signs that reflect an axial vector (an angular velocity, a rotation vector): a reflection reverses the sense of
+rotation, so the components about x and z change sign and the one about y (normal to the plane) keeps it."""
+MIRROR_QUAT: tuple[float, float, float, float] = (1.0, -1.0, 1.0, -1.0)
+"""Signs that reflect a (w, x, y, z) orientation, trunk to world, in the x-z plane (R -> S R S, S = diag(1, -1,
+1)): the rotation axis reflects as an axial vector, the angle stays."""
+MIRROR_LEGS: tuple[int, ...] = (1, 0, 3, 2)
+"""The leg whose mirror image each leg of LEG_NAMES is: FR <-> FL, RR <-> RL (HIP_OFFSETS)."""
+MIRROR_PART_SIGNS: tuple[float, float, float] = (-1.0, 1.0, 1.0)
+"""Per leg (hip abduction, thigh, calf): the sign a joint angle takes in its mirror joint. a1.xml: every abduction
+joint turns about the trunk's x axis, which lies in the plane, so the mirror image turns the other way (-1); the
+thigh and calf joints turn about y, normal to the plane, so the mirror image turns the same way (+1). Each joint's
+range is symmetric under it (ABDUCTION_LIMITS is, and thigh and calf keep their own)."""
+MIRROR_JOINTS: tuple[int, ...] = tuple(3 * MIRROR_LEGS[j // 3] + j % 3 for j in range(NUM_JOINTS))
+"""The joint of JOINT_NAMES whose mirror image each joint is: its leg's mirror, the same part."""
+MIRROR_JOINT_SIGNS: tuple[float, ...] = MIRROR_PART_SIGNS * NUM_LEGS
+"""Per joint of JOINT_NAMES: mirrored angle (or velocity, or action) = this sign x the mirror joint's."""
