@@ -137,6 +137,13 @@ class ObservationConfig:
     a training lever, :mod:`gaitlib.training.recipe`)."""
 
     @property
+    def policy(self) -> tuple[Field, ...]:
+        """The fields of the actor observation in order: :data:`FRAME` for each of the :data:`HISTORY` frames (newest
+        first), :data:`REFERENCE_FRAME` for each of the :data:`REFERENCE_OFFSETS`, then :data:`HEADING` where
+        :attr:`heading`."""
+        return FRAME * HISTORY + REFERENCE_FRAME * len(REFERENCE_OFFSETS) + (HEADING if self.heading else ())
+
+    @property
     def privileged(self) -> tuple[Field, ...]:
         """The critic's extras."""
         return PRIVILEGED + (DELAY if self.critic_delay else ())
