@@ -37,7 +37,7 @@ def test_unknown_gait_is_one_error_line(tmp_path) -> None:
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         "gaitlib: error: unknown gait 'moonwalk' (known: bound, pace, pace_slow, pronk, sidestep_left, sidestep_right, "
-        "stand, trot, trot_back, trot_in_place, trot_left, trot_right, trot_slow, turn_left, walk)"
+        "stand, trot, trot_back, trot_in_place, trot_left, trot_right, trot_slow, turn_left, turn_right, walk)"
     ]
 
 
