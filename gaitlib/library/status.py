@@ -42,7 +42,8 @@ class GaitStatus:
 
     @property
     def summary(self) -> dict:
-        """Description, training recipe and evaluation figures in a few numbers."""
+        """Description, training recipe (or the entry it is the mirror image of) and evaluation figures in a few
+        numbers."""
         m = self.metadata
         d, t, e = m.get("description", {}), m.get("training", {}), m.get("evaluation", {})
         return {
@@ -53,6 +54,7 @@ class GaitStatus:
             "iterations": t.get("iterations"),
             "train_minutes": None if t.get("wall_clock_s") is None else round(t["wall_clock_s"] / 60, 1),
             "switch_start": t.get("switch_start"),
+            "mirror_of": t.get("mirror", {}).get("source"),
             "eval_episodes": e.get("episodes"),
             "eval_fall_rate": e.get("fall_rate"),
             "eval_touch_rate": e.get("touch_rate"),

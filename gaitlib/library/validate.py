@@ -4,9 +4,10 @@ block against the one the entry's own settings give (:func:`deployment_differenc
 The observation layout and the action settings are checked by :mod:`gaitlib.library.store` itself; here are the
 rest: the gait description (ranges, then :class:`~gaitlib.gaits.GaitDescription`'s own checks), the robot, the
 networks (and that they are the preset's), the training record (its preset, randomization ranges, learning curve,
-switch-start record), the evaluation (rates in [0, 1] inside their intervals, counts within the episodes, the
-figures of one generation of the record together), the versions and the checksums. Free-form parts that later
-versions may extend pass if their numbers are finite. A refusal is one line naming the field.
+switch-start record; or, for an entry made as another's mirror image, its ``mirror`` record), the evaluation (rates
+in [0, 1] inside their intervals, counts within the episodes, the figures of one generation of the record together),
+the versions and the checksums. Free-form parts that later versions may extend pass if their numbers are finite. A
+refusal is one line naming the field.
 """
 
 from __future__ import annotations
@@ -39,7 +40,14 @@ if TYPE_CHECKING:
     from gaitlib.envs.observations import ObservationConfig
     from gaitlib.gaits import ReferenceClip
 
-__all__ = ["EVALUATION_FIGURES", "check_action", "check_deployment", "check_metadata", "deployment_difference"]
+__all__ = [
+    "EVALUATION_FIGURES",
+    "MIRROR_RECORD",
+    "check_action",
+    "check_deployment",
+    "check_metadata",
+    "deployment_difference",
+]
 
 _PUSH_N = number(0, 2000, unit="N")
 _SEED = number(0, 2**32 - 1, whole=True)
@@ -94,9 +102,15 @@ _SWITCH_START = record(
     {"handed_over": text()},
     extra=plain(),
 )
+_MIRROR = record(
+    {"source": GAIT_NAME, "source_sha256": SHA256, "phase_shift": number(0, 1, high_open=True), "command": text()},
+    {"source_library": text(), "source_description": _DESCRIPTION},
+    extra=plain(),
+)
 _TRAINING = record(
     {},
     {
+        "mirror": _MIRROR,
         "preset": _PRESET, "backend": text(("mujoco", "newton")), "iterations": _COUNT, "samples": _COUNT,
         "wall_clock_s": number(0, unit="s"), "seed": _SEED, "randomization": RANDOMIZATION, "recipe": _RECIPE,
         "episode_seconds": _SECONDS, "push_ramp_iterations": _COUNT,
@@ -111,6 +125,9 @@ TRAINING_RECORD = ("preset", "backend", "iterations", "samples", "wall_clock_s",
                    "episode_seconds", "push_ramp_iterations", "curve")
 """What ``gaitlib train`` records of a run, all or none (an entry saved through the Python API may record
 nothing), with one of ``push_max_n`` and (before 0.2) ``push_force_max_n``."""
+MIRROR_RECORD = ("mirror", "randomization")
+"""What ``gaitlib mirror`` records of an entry it makes: how (``mirror``) and the randomization its source was
+trained under (the action delay it runs with), nothing of a run."""
 _EVALUATION = record(
     {},
     {
@@ -191,8 +208,14 @@ def check_metadata(metadata: Mapping) -> None:
     except GaitlibError as error:
         raise Invalid("description", f"is not a gait: {error}") from None
     training, networks = metadata["training"], metadata["networks"]
-    _together("training", training, TRAINING_RECORD, ("push_max_n", "push_force_max_n"))
-    for part, first in (("training", TRAINING_RECORD[0]), ("evaluation", EVALUATION_FIGURES[0][0])):
+    if "mirror" in training:  # made from another entry's weights (gaitlib.training.mirror), not trained
+        run = next((key for key in training if key not in MIRROR_RECORD), None)
+        if run is not None:
+            raise Invalid(f"training.{run}", "belongs to a training run, not to a mirror image (training.mirror)")
+    else:
+        _together("training", training, TRAINING_RECORD, ("push_max_n", "push_force_max_n"))
+    for part, first in (("training", MIRROR_RECORD[0] if "mirror" in training else TRAINING_RECORD[0]),
+                        ("evaluation", EVALUATION_FIGURES[0][0])):
         if metadata[part] and first not in metadata[part]:
             raise Invalid(f"{part}.{first}", f"is missing: a {part} record is empty or holds what gaitlib records")
     preset = training.get("preset", {})
