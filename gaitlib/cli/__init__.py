@@ -9,7 +9,19 @@ from importlib.metadata import version
 
 import typer
 
-from gaitlib.cli import drive, evaluate, gaits, library, routes, survival, switching, throughput, train, transitions
+from gaitlib.cli import (
+    drive,
+    evaluate,
+    gaits,
+    library,
+    mirror,
+    routes,
+    survival,
+    switching,
+    throughput,
+    train,
+    transitions,
+)
 from gaitlib.errors import GaitlibError
 
 __all__ = ["app", "main"]
@@ -40,6 +52,7 @@ def _options(
 
 
 app.command("train")(train.train_command)
+app.command("mirror")(mirror.mirror_command)
 app.command("eval")(evaluate.eval_command)
 app.command("library")(library.library_command)
 app.command("gaits")(gaits.gaits_command)

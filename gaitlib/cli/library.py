@@ -43,7 +43,8 @@ def library_command(
     for g in status.gaits:
         s = g.summary
         gaits.add_row(
-            g.name, _num(s["speed_m_s"], 2), _num(s["cycle_s"], 3), str(s["preset"] or "-"),
+            g.name, _num(s["speed_m_s"], 2), _num(s["cycle_s"], 3),
+            str(s["preset"] or (f"mirror of {s['mirror_of']}" if s["mirror_of"] else "-")),
             str(s["iterations"] or "-"), _num(s["train_minutes"], 1),
             "-" if s["eval_fall_rate"] is None
             else f"{100 * s['eval_fall_rate']:.1f}% of {s['eval_episodes']} ({s['eval_falls']})",
