@@ -53,7 +53,8 @@ def main() -> None:
                    str(args.worlds), "--steps", str(args.steps)]
         runs[mode] = json.loads(subprocess.run(command, capture_output=True, text=True, check=True).stdout)
     growth = {mode: round(after[-1] - after[0], 1) for mode, after in runs.items()}
-    print(json.dumps({"backends": args.backends, "worlds": args.worlds, "resident_mb_after_each_close": runs,
+    print(json.dumps({"backends": args.backends, "worlds": args.worlds, "steps": args.steps,
+                      "resident_mb_after_each_close": runs,
                       "growth_mb_first_to_last": growth,
                       "growth_trimmed_vs_kept": round(growth["trim"] / growth["keep"], 3) if growth["keep"] else None}))
 
