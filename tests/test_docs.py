@@ -27,6 +27,8 @@ PLACEHOLDER = re.compile(r"(?<![A-Za-z])(?!README|CHANGELOG|LICENSE|MANIFEST)[A-
 CODE_SPAN = re.compile(r"`([^`\n]+)`")
 FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.S | re.M)
 LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+NOT_YET = re.compile(r"Not yet measured: .*? not stored yet\.", re.S)
+"""A generated table's sentence naming the evidence a measurement is still to store (``benchmarks.results``)."""
 
 
 def _code(text: str) -> list[str]:
@@ -44,8 +46,9 @@ def _is_path(token: str) -> bool:
 
 
 def named_paths(text: str, page: Path) -> set[str]:
-    """The repository paths ``text`` (the page ``page``) names: in code, and as relative links."""
-    found = set()
+    """The repository paths ``text`` (the page ``page``) names: in code, and as relative links; not the evidence a
+    table's "Not yet measured" sentence names, which its measurement is still to store."""
+    found, text = set(), NOT_YET.sub("", text)
     for code in _code(text):
         for token in re.split(r"[\s=\"'(),\[\]]+", code):
             if _is_path(token):
@@ -109,6 +112,13 @@ def test_the_checks_catch_a_bogus_flag_a_bogus_command_and_a_missing_file() -> N
             "`docs/switching.md`; `runs/library/metadata.json` is written at run time.\n")
     assert sorted(unknown_flags(text)) == ["gaitlib run --bogus-flag", "gaitlib survival fit --no-such-option"]
     assert sorted(p for p in named_paths(text, page) if not _exists(p)) == ["gaitlib/no_such_module.py"]
+
+
+def test_a_table_not_yet_measured_names_its_evidence_to_come_but_other_paths_are_checked() -> None:
+    page = ROOT / "docs" / "example.md"
+    text = ("Not yet measured: `docs/results/timings/a.json`,\n`docs/results/timings/b.json` not stored yet.\n\n"
+            "See `docs/results/timings/c.json`.\n")
+    assert sorted(named_paths(text, page)) == ["docs/results/timings/c.json"]
 
 
 def test_the_cli_reference_is_what_the_app_makes() -> None:

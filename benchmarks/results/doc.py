@@ -13,7 +13,8 @@ Everything between the two markers is made here from the evidence and nothing el
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
 :mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills`,
-:mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings` and :mod:`~benchmarks.results.overview`; how
+:mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings`, :mod:`~benchmarks.results.speeds` and
+:mod:`~benchmarks.results.overview`; how
 evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
@@ -42,6 +43,13 @@ from benchmarks.results.headline import (
 from benchmarks.results.overview import readme_results, runs_where
 from benchmarks.results.robustness import library_table, robustness_table, shove_table
 from benchmarks.results.skills import skills_bar, skills_shoves
+from benchmarks.results.speeds import (
+    collect_throughput_table,
+    entry_load_table,
+    memory_table,
+    sim_throughput_table,
+    writes_table,
+)
 from benchmarks.results.sweep import HELD_OUT, sweep_table
 from benchmarks.results.switches import map_table, switches_table
 from benchmarks.results.timings import (
@@ -70,7 +78,8 @@ PAGES = {
     "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                   "guard-pairs-menagerie-recover"),
     "results_history": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
-    "benchmarks": ("recipe-speed", "guard-cost", "command-start", "command-start-policy", "suite-latest",
+    "benchmarks": ("sim-throughput", "recipe-speed", "collect-throughput", "backend-memory", "guard-cost",
+                   "transition-writes", "command-start", "command-start-policy", "suite-latest", "entry-load",
                    "gpu-check-h100", "gpu-check-graph"),
     "README": ("readme-results", "runs-where"),
 }
@@ -131,6 +140,8 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "guard-cost": guard_cost_table(Path(evidence_dir).parent / "guard" / "guard-cost-recover.json"),
               "command-start": command_start_table(), "command-start-policy": command_start_policy_table(),
               "suite-latest": suite_table(), "gpu-check-h100": gpu_check_table(), "gpu-check-graph": gpu_graph_table(),
+              "sim-throughput": sim_throughput_table(), "collect-throughput": collect_throughput_table(),
+              "backend-memory": memory_table(), "transition-writes": writes_table(), "entry-load": entry_load_table(),
               "readme-results": readme_results(evidence_dir, accuracy, Path(evidence_dir).parent / "guard"),
               "runs-where": runs_where()}
     return {name: _wrap(tables[name]) for name in TABLES}
