@@ -36,8 +36,9 @@ def test_unknown_gait_is_one_error_line(tmp_path) -> None:
     result = gaitlib_quick("train", "moonwalk", "--library", str(tmp_path))
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        "gaitlib: error: unknown gait 'moonwalk' (known: bound, pace, pace_slow, pronk, sidestep_left, sidestep_right, "
-        "stand, trot, trot_back, trot_in_place, trot_left, trot_right, trot_slow, turn_left, turn_right, walk)"
+        "gaitlib: error: unknown gait 'moonwalk' (known: bound, catch, pace, pace_slow, pronk, sidestep_left, "
+        "sidestep_right, stand, trot, trot_back, trot_in_place, trot_left, trot_right, trot_slow, turn_left, "
+        "turn_right, walk)"
     ]
 
 
