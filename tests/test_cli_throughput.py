@@ -42,8 +42,8 @@ def test_help_lists_only_working_commands() -> None:
     panel = result.stdout.split("Commands")[1]
     listed = set(re.findall(r"^│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE))
     assert listed == {
-        "benchmark", "throughput", "collect", "drive", "eval", "fit", "gaits", "library", "map", "routes", "run",
-        "states", "survival", "train",
+        "benchmark", "throughput", "collect", "drive", "eval", "fit", "gaits", "library", "map", "mirror", "routes",
+        "run", "states", "survival", "train",
     }
 
 
