@@ -54,7 +54,7 @@ def main() -> None:
     rows, commands = [], []
 
     def measure(name: str, library: Path, strategy: str, made: list[str] | None) -> None:
-        out = args.work / f"bench-{name}"
+        out = args.work / f"bench-{name}-{args.magnitudes.replace(',', '_')}n"
         command = [*bench, "--library", str(library), "--strategies", strategy, "--out", str(out)]
         _run(command)
         commands.extend(shlex.join(c) for c in ([made] if made else []) + [command])

@@ -80,3 +80,16 @@ def test_a_benchmark_of_the_pairs_a_net_was_fitted_on_runs_and_others_are_refuse
     assert cell["samples"] == 2
     refused = gaitlib_quick(*args[:-3], "--out", str(tmp_path / "other"), "--pairs", "trot-stand")
     assert refused.returncode != 0 and "trot-stand" in refused.stderr and not (tmp_path / "other").exists()
+
+
+def test_the_budget_is_the_smallest_within_the_largest_s_interval() -> None:
+    from benchmarks.results.budget import budget_per_pair
+
+    def row(name: str, falls: int, strategy: str = "net-lookahead") -> dict:
+        return {"row": name, "strategy": strategy, "falls": falls, "trials": 5000}
+
+    rows = [row("random", 263, "random"), row("500", 82), row("1500", 39), row("4000", 30), row("6668", 31)]
+    assert budget_per_pair({"rows": rows, "files": ["a", "b"]}) == 1500  # 39 of 5000 lies in 31's interval
+    rows[2]["falls"] = 60  # outside it: the next budget that is inside
+    assert budget_per_pair({"rows": rows, "files": ["a", "b"]}) == 4000
+

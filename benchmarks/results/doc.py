@@ -5,7 +5,8 @@
 
 Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the page :data:`PAGES` gives it:
 ``docs/results.md`` (the current state), ``docs/ablation.md`` (the robust recipe's ablation),
-``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve),
+``docs/switching_results.md`` (the switches in detail), ``docs/transitions.md`` (the net's learning curve and
+the switch-success budget),
 ``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard),
 ``docs/results_history.md`` (the guard before the library grew), ``docs/benchmarks.md`` (today's speeds and times)
 and ``README.md`` (the library beside the paper, what runs where).
@@ -13,8 +14,8 @@ Everything between the two markers is made here from the evidence and nothing el
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
 :mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills`,
-:mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings`, :mod:`~benchmarks.results.speeds` and
-:mod:`~benchmarks.results.overview`; how
+:mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings`, :mod:`~benchmarks.results.speeds`,
+:mod:`~benchmarks.results.overview` and :mod:`~benchmarks.results.budget`; how
 evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
@@ -27,6 +28,7 @@ import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
+from benchmarks.results.budget import budget_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
@@ -73,7 +75,7 @@ PAGES = {
                 "net-accuracy"),
     "ablation": ("robustness-gaits", "robust-library"),
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
-    "transitions": ("net-curve",),
+    "transitions": ("net-curve", "budget-curve", "budget-curve-50n"),
     "skills": ("skills-bar", "skills-shoves"),
     "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                   "guard-pairs-menagerie-recover"),
@@ -128,6 +130,8 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "robustness-gaits": robustness_table(ablation), "robust-library": library_table(ablation),
               "routes": routes_table(evidence_dir, goal=ROBUST_GOAL), "routes-switch-start": routes_table(earlier),
               "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name),
+              **{f"budget-curve{tag}": budget_table(Path(evidence_dir).parent / "budget" / f"success-curve{tag}.json")
+                 for tag in ("", "-50n")},
               "skills-bar": skills_bar(Path(evidence_dir).parent),
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
