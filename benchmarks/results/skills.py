@@ -1,7 +1,7 @@
 """The tables of the skills beyond the six gaits, each in the library that holds it with its evaluation: every
 skill against the quality bar for a skill that steers, and under shoves, from the evidence stored for each folder
-(``docs/results/steer`` for ``library-steer/``, staged; ``docs/results/recover`` for the shipped ``library/``'s
-recovery skill)."""
+(``docs/results/steer`` for ``library-steer/``, staged; ``docs/results/mirror`` for ``library-mirror/``, the
+mirror images of staged skills; ``docs/results/recover`` for the shipped ``library/``'s recovery skill)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from gaitlib.stats import wilson_interval
 
 __all__ = ["STAGED", "STILL", "skill_misses", "skills_bar", "skills_shoves"]
 
-STAGED = {"steer": "library-steer", "recover": "library"}
+STAGED = {"steer": "library-steer", "mirror": "library-mirror", "recover": "library"}
 """Each skill folder's evidence folder (under ``docs/results``) and the library that holds its skills (under the
 repository)."""
 STILL = 0.05
@@ -93,8 +93,9 @@ def skills_bar(results: Path = ROOT / "docs" / "results") -> str:
         cells = [_cell(*figures[k]) if k in figures else "-" for k in ("forward", "lateral", "yaw rate")]
         falls = round(result["fall_rate"] * result["episodes"])
         misses = skill_misses(result)
-        lines.append(f"| `{name}` | `{folder.name}/` | {reference} | {training['iterations']:,} iterations, "
-                     f"{training['wall_clock_s'] / 60:.1f} min | {falls} of {result['episodes']} "
+        made = (f"mirror of `{training['mirror']['source']}`" if "mirror" in training
+                else f"{training['iterations']:,} iterations, {training['wall_clock_s'] / 60:.1f} min")
+        lines.append(f"| `{name}` | `{folder.name}/` | {reference} | {made} | {falls} of {result['episodes']} "
                      f"{interval(*result['fall_ci95'])} | {' | '.join(cells)} | {_heading(result):.2f} deg "
                      f"| {'no: ' + '; '.join(misses) if misses else 'yes'} |")
     meeting = sum(not skill_misses(e["result"]) for *_, e in staged)
