@@ -8,10 +8,12 @@ from pathlib import Path
 from benchmarks.results.evidence import ROOT, arrow, cite, interval, not_yet, pct, read_evidence
 from gaitlib.stats import wilson_interval
 
-__all__ = ["BUDGET", "budget_per_pair", "budget_table"]
+__all__ = ["BUDGET", "SCREEN", "budget_per_pair", "budget_table", "screen_table"]
 
 BUDGET = ROOT / "docs" / "results" / "budget" / "success-curve.json"
 """The stored curve."""
+SCREEN = ROOT / "docs" / "results" / "budget" / "screen-steer-0n.json"
+"""The stored random screen of the steering skills' new pairs."""
 
 
 def _success(row: dict) -> tuple[int, int]:
@@ -54,3 +56,32 @@ def budget_table(path: Path = BUDGET) -> str:
         how += (" The budget a new pair gets, the smallest whose pooled success lies within the largest's 95% "
                 f"interval: **{budget:,} samples a pair** ({budget // files:,} a collection).")
     return "\n".join([*lines, "", f"{how} Evidence: {cite(Path(path), evidence)}."])
+
+
+def screen_table(path: Path = SCREEN, *, most: int = 10) -> str:
+    """A short random screen of a growth's new pairs: how many pairs fell at all, the pooled falls, and the ``most``
+    pairs that fell most."""
+    evidence = read_evidence(Path(path))
+    if evidence is None:
+        return not_yet(Path(path))
+    (group,) = evidence["result"]["groups"].values()
+    cells = group["cells"]
+    trials = sum(c["samples"] for c in cells.values())
+    falls = trials - sum(c["successes"] for c in cells.values())
+    fell = sorted((p for p, c in cells.items() if c["successes"] < c["samples"]),
+                  key=lambda p: (cells[p]["successes"] / cells[p]["samples"], p))
+    per_pair = {c["samples"] for c in cells.values()}
+    lines = ["| pair | falls | success, % [95% interval] |", "|---|---|---|"]
+    for pair in fell[:most]:
+        won, n = cells[pair]["successes"], cells[pair]["samples"]
+        lines.append(f"| {arrow(pair)} | {n - won} of {n} | {pct(won / n)} {interval(*wilson_interval(won, n))} |")
+    low, high = wilson_interval(falls, trials)
+    return "\n".join([
+        *lines, "",
+        f"A random moment at 0 N, {'/'.join(map(str, sorted(per_pair)))} trials a pair on seed "
+        f"{evidence['result']['settings']['seed']}: {len(cells) - len(fell)} of {len(cells)} pairs never fell; "
+        f"{falls} falls in {trials:,} switches pooled, {pct(falls / trials)}% {interval(low, high)}. The "
+        f"{min(most, len(fell))} of the {len(fell)} pairs that fell most are listed. Evidence: "
+        f"{cite(Path(path), evidence)}.",
+    ])
+

@@ -28,7 +28,7 @@ import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
-from benchmarks.results.budget import budget_table
+from benchmarks.results.budget import budget_table, screen_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
@@ -75,7 +75,7 @@ PAGES = {
                 "net-accuracy"),
     "ablation": ("robustness-gaits", "robust-library"),
     "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
-    "transitions": ("net-curve", "budget-curve", "budget-curve-50n"),
+    "transitions": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen"),
     "skills": ("skills-bar", "skills-shoves"),
     "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                   "guard-pairs-menagerie-recover"),
@@ -132,6 +132,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "map": map_table(evidence_dir), "net-curve": curve_table(Path(evidence_dir) / CURVE.name),
               **{f"budget-curve{tag}": budget_table(Path(evidence_dir).parent / "budget" / f"success-curve{tag}.json")
                  for tag in ("", "-50n")},
+              "budget-screen": screen_table(Path(evidence_dir).parent / "budget" / "screen-steer-0n.json"),
               "skills-bar": skills_bar(Path(evidence_dir).parent),
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
