@@ -76,7 +76,7 @@ def test_the_collection_memory_writes_and_load_tables_from_small_evidence(tmp_pa
 
 
 def test_the_tables_are_the_benchmarks_pages_blocks() -> None:
-    assert set(speeds.BLOCKS) <= set(doc.PAGES["benchmarks"])
+    assert set(speeds.BLOCKS) <= set(doc.PAGES["docs/benchmarks.md"])
     assert {measure.block for measure in speeds.MEASURES.values()} == set(speeds.BLOCKS)
     assert all(block in doc.render_tables() for block in speeds.BLOCKS)
 

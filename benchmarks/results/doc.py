@@ -9,13 +9,15 @@ Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the 
 the switch-success budget),
 ``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard),
 ``docs/results_history.md`` (the guard before the library grew), ``docs/benchmarks.md`` (today's speeds and times)
-and ``README.md`` (the library beside the paper, what runs where).
+``README.md`` (the library beside the paper, what runs where), ``docs/failures.md`` (the fuzz runs' counts) and
+``library/README.md`` (how each shipped gait does).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
 :mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills`,
 :mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings`, :mod:`~benchmarks.results.speeds`,
-:mod:`~benchmarks.results.overview` and :mod:`~benchmarks.results.budget`; how
+:mod:`~benchmarks.results.overview`, :mod:`~benchmarks.results.budget`, :mod:`~benchmarks.results.fuzz` and
+:mod:`~benchmarks.results.entries`; how
 evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
@@ -29,7 +31,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.budget import budget_table, screen_table
+from benchmarks.results.entries import entries_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
+from benchmarks.results.fuzz import edits_table, flips_table
 from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
     ACCURACY,
@@ -71,27 +75,29 @@ __all__ = [
 ]
 
 PAGES = {
-    "results": ("quality-bar", "shove-curves", "switches", "guard-summary", "sweep", "strategies-menagerie",
+    "docs/results.md": ("quality-bar", "shove-curves", "switches", "guard-summary", "sweep", "strategies-menagerie",
                 "net-accuracy"),
-    "ablation": ("robustness-gaits", "robust-library"),
-    "switching_results": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
-    "transitions": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen"),
-    "skills": ("skills-bar", "skills-shoves"),
-    "switching": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
-                  "guard-pairs-menagerie-recover"),
-    "results_history": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
-    "benchmarks": ("sim-throughput", "recipe-speed", "collect-throughput", "backend-memory", "guard-cost",
-                   "transition-writes", "command-start", "command-start-policy", "suite-latest", "entry-load",
-                   "gpu-check-h100", "gpu-check-graph"),
-    "README": ("readme-results", "runs-where"),
+    "docs/ablation.md": ("robustness-gaits", "robust-library"),
+    "docs/switching_results.md": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
+    "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen"),
+    "docs/skills.md": ("skills-bar", "skills-shoves"),
+    "docs/switching.md": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
+                          "guard-pairs-menagerie-recover"),
+    "docs/results_history.md": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
+    "docs/benchmarks.md": ("sim-throughput", "recipe-speed", "collect-throughput", "backend-memory", "guard-cost",
+                           "transition-writes", "command-start", "command-start-policy", "suite-latest", "entry-load",
+                           "gpu-check-h100", "gpu-check-graph"),
+    "README.md": ("readme-results", "runs-where"),
+    "docs/failures.md": ("fuzz-flips", "fuzz-edits"),
+    "library/README.md": ("library-entries",),
 }
-"""Each results page (``docs/NAME.md``; ``README.md`` at the root) and its generated blocks, in the page's order."""
+"""Each results page by its path from the repository's root and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
 """The guards whose tables the pages show, by the tag of their stored evaluations: the six gaits' (made before the
 library grew, ``docs/results_history.md``) and the shipped library's, grown by the recovery skill (``recover``,
 ``docs/switching.md``)."""
-DOCS = tuple(ROOT / f"{page}.md" if page == "README" else ROOT / "docs" / f"{page}.md" for page in PAGES)
-"""The results pages, :data:`PAGES` in order (``README.md`` at the repository's root, the others in ``docs/``)."""
+DOCS = tuple(ROOT / page for page in PAGES)
+"""The results pages, :data:`PAGES` in order."""
 DOC = DOCS[0]
 """The results page of the current state, ``docs/results.md``."""
 TABLES = tuple(name for names in PAGES.values() for name in names)
@@ -148,17 +154,21 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "sim-throughput": sim_throughput_table(), "collect-throughput": collect_throughput_table(),
               "backend-memory": memory_table(), "transition-writes": writes_table(), "entry-load": entry_load_table(),
               "readme-results": readme_results(evidence_dir, accuracy, Path(evidence_dir).parent / "guard"),
-              "runs-where": runs_where()}
+              "runs-where": runs_where(), "fuzz-flips": flips_table(), "fuzz-edits": edits_table(),
+              "library-entries": entries_table(evidence_dir, Path(evidence_dir).parent / "recover")}
     return {name: _wrap(tables[name]) for name in TABLES}
 
 
 def page_tables(doc: Path) -> tuple[str, ...]:
-    """The generated blocks of the results page ``doc`` (by its file name, :data:`PAGES`); one line for another
+    """The generated blocks of the results page ``doc``: by its path from the repository's root (:data:`PAGES`), a
+    file outside the repository (a copy) by its file name when that names one page alone; one line for another
     file."""
-    page = Path(doc).stem
-    if page not in PAGES:
-        raise ValueError(f"{doc} is not a results page (the pages: {', '.join(f'{p}.md' for p in PAGES)})")
-    return PAGES[page]
+    path = Path(doc).resolve()
+    named = [path.relative_to(ROOT).as_posix()] if path.is_relative_to(ROOT) else \
+        [page for page in PAGES if Path(page).name == path.name]
+    if len(named) != 1 or named[0] not in PAGES:
+        raise ValueError(f"{doc} is not a results page (the pages: {', '.join(PAGES)})")
+    return PAGES[named[0]]
 
 
 def _block(name: str, body: str) -> str:
@@ -172,7 +182,7 @@ def _blocks(text: str, names: Sequence[str]) -> dict[str, str]:
     for match in BLOCK.finditer(text):
         name = match.group(1)
         if name in blocks or name not in names:
-            where = next((f"docs/{page}.md" for page, held in PAGES.items() if name in held), None)
+            where = next((page for page, held in PAGES.items() if name in held), None)
             why = "repeated" if name in blocks else f"for {where}" if where else "unknown"
             raise ValueError(f"the table marker '{name}' is {why}")
         blocks[name] = match.group(0)
@@ -231,7 +241,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.results", description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="change nothing; exit 1 if a table differs")
     parser.add_argument("--doc", type=Path, action="append",
-                        help="a results page, by its file name one of PAGES (default: every page; repeatable)")
+                        help="a results page, one of PAGES (default: every page; repeatable)")
     parser.add_argument("--evidence", type=Path, default=EVIDENCE, help="the stored results (docs/results/library)")
     parser.add_argument("--accuracy", type=Path, default=ACCURACY, help="the accuracy report (the shipped library's)")
     args = parser.parse_args(argv)
