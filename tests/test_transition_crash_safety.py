@@ -257,6 +257,16 @@ def test_out_of_range_gait_indices_and_negative_counts_are_one_line(tmp_path) ->
         validate(path)
 
 
+def test_a_part_list_whose_shape_is_damaged_is_refused_without_reading_it(tmp_path) -> None:
+    path = make_file(tmp_path / "t.h5", synthetic(3))
+    with h5py.File(path, "r+") as f:  # as a flipped byte of the dataset's shape would: 2^40 rows, none stored
+        dtype = f["parts"].dtype
+        del f["parts"]
+        f.create_dataset("parts", shape=(1 << 40,), dtype=dtype, chunks=(1,))
+    with pytest.raises(TransitionDataError, match="index attribute or part list missing or malformed"):
+        validate(path)
+
+
 def test_nothing_is_created_for_a_refused_request(tiny_library, tmp_path) -> None:
     path = tmp_path / "out" / "t.h5"
     refused = (

@@ -314,7 +314,10 @@ def _read_index(f: h5py.File, path: Path) -> TransitionIndex:
         count = int(attrs["count"])
         sessions = tuple(json.loads(attrs["sessions"]))
         provenance = {"created_by": str(attrs["created_by"]), "created": str(attrs["created"])}
-        parts = tuple(Part(row["file"].decode(), int(row["rows"]), row["sha256"].decode()) for row in f["parts"][()])
+        listed = f["parts"]
+        if listed.size * listed.dtype.itemsize > Path(path).stat().st_size:  # a damaged shape, not a part list
+            raise ValueError(f"a part list of {listed.size} rows in a file of {Path(path).stat().st_size} bytes")
+        parts = tuple(Part(row["file"].decode(), int(row["rows"]), row["sha256"].decode()) for row in listed[()])
         stored = {name: attrs[name] for name in _DIGESTED}
         stored |= {name: list(_text_list(stored[name])) for name in ("gaits", "library_identities")}
         sound = _index_digest(stored, parts) == str(attrs["index_sha256"])
