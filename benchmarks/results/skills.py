@@ -1,7 +1,8 @@
 """The tables of the skills beyond the six gaits, each in the library that holds it with its evaluation: every
 skill against the quality bar for a skill that steers, and under shoves, from the evidence stored for each folder
 (``docs/results/steer`` for ``library-steer/``, staged; ``docs/results/mirror`` for ``library-mirror/``, the
-mirror images of staged skills; ``docs/results/recover`` for the shipped ``library/``'s recovery skill)."""
+mirror images of staged skills; ``docs/results/catch`` for ``library-catch/``, the catch skill trained without a
+reference motion; ``docs/results/recover`` for the shipped ``library/``'s recovery skill)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from gaitlib.stats import wilson_interval
 
 __all__ = ["STAGED", "STILL", "skill_misses", "skills_bar", "skills_shoves"]
 
-STAGED = {"steer": "library-steer", "mirror": "library-mirror", "recover": "library"}
+STAGED = {"steer": "library-steer", "mirror": "library-mirror", "catch": "library-catch", "recover": "library"}
 """Each skill folder's evidence folder (under ``docs/results``) and the library that holds its skills (under the
 repository)."""
 STILL = 0.05
