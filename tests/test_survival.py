@@ -16,10 +16,10 @@ from gaitlib.strategies.survival import (
     FALSE_ALARMS_PER_MIN,
     FLOORS,
     check_guard,
-    fit_survival,
     load_survival,
     save_survival,
 )
+from gaitlib.strategies.survival_fit import fit_survival
 from tests.cli_runner import gaitlib_quick
 from tests.conftest import copy_library
 

@@ -20,7 +20,8 @@ from gaitlib.errors import GaitlibError
 from gaitlib.library import Library
 from gaitlib.library.layout import shipped_library_dir
 from gaitlib.meta import load_switching
-from gaitlib.strategies.survival import fit_survival, load_survival, save_survival
+from gaitlib.strategies.survival import load_survival, save_survival
+from gaitlib.strategies.survival_fit import fit_survival
 from tests.cli_runner import gaitlib_quick
 from tests.conftest import copy_library
 from tests.test_guard import _forced
@@ -150,7 +151,7 @@ def test_the_estimate_is_checksummed_and_a_damaged_one_is_refused_by_every_comma
 def test_writers_of_the_guard_hold_the_library_for_their_whole_run(recorded, switching_library, tmp_path,
                                                                    monkeypatch):
     import gaitlib.benchmark.catches as catches
-    import gaitlib.strategies.survival as survival
+    import gaitlib.strategies.survival_fit as survival
 
     library = _guarded(switching_library, tmp_path, stay={"trot": 0.5, "stand": 0.5})
     second, started = [], []

@@ -83,8 +83,8 @@ def fit_command(
     from gaitlib.collection.survival import read_survival_states
     from gaitlib.library import Library
     from gaitlib.library.target import copy_library, library_writer
-    from gaitlib.strategies.survival import check_guard, fit_survival, save_survival
-    from gaitlib.strategies.survival_fit import check_fit
+    from gaitlib.strategies.survival import check_guard, save_survival
+    from gaitlib.strategies.survival_fit import check_fit, fit_survival
 
     chosen = parse_values(horizons, option="--horizons", bounds=GUARD_HORIZON_S, example="0.5:1.5:0.5")
     try:

@@ -26,7 +26,6 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from gaitlib.atomic import file_sha256, torch_bytes, write_bytes
@@ -40,7 +39,7 @@ from gaitlib.values import GUARD_HORIZON_S, number_text
 
 __all__ = [
     "FALSE_ALARMS_PER_MIN", "FLOORS", "HORIZONS_S", "INPUTS", "MARGINS", "SURVIVAL_FILE", "SurvivalEstimate",
-    "SurvivalFileError", "SurvivalNet", "check_finite", "check_guard", "fit_survival", "load_survival",
+    "SurvivalFileError", "SurvivalNet", "check_finite", "check_guard", "load_survival",
     "save_catch_table", "save_survival", "shove_sector", "survival_features",
 ]
 
@@ -174,14 +173,6 @@ class SurvivalEstimate:
             rows = gait == g
             a[rows], b[rows] = pa, pb
         return torch.sigmoid(a * z + b)
-
-
-def fit_survival(data: dict[str, np.ndarray], **options) -> SurvivalEstimate:
-    """Fit, calibrate and choose (module doc) on recorded states ``data``: :func:`gaitlib.strategies.survival_fit.
-    fit_survival`, whose options it takes."""
-    from gaitlib.strategies import survival_fit
-
-    return survival_fit.fit_survival(data, **options)
 
 
 def check_finite(estimate: SurvivalEstimate) -> None:
