@@ -10,6 +10,8 @@ parallel worlds costs in memory is checked against the machine by :func:`check_w
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
+from pathlib import Path
 
 import typer
 
@@ -215,14 +217,20 @@ def _available_bytes() -> int:
     return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
-def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ...] | None:
-    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it. A text that
-    names no pair, or a pair with an empty side, is refused."""
+def parse_pairs(text: str | None, gaits: list[str], *,
+                identities: Mapping[str, str] | None = None) -> tuple[tuple[str, str], ...] | None:
+    """``trot-stand,pace-stand`` -> ordered pairs; a bare gait name stands for every pair involving it, and
+    ``fell:FILE`` for every pair in which a switch of the transition file FILE (a screen of the library's policies
+    ``identities``, gait name -> identity) fell, by the default definition of a fall. A text that names no pair, or
+    a pair with an empty side, is refused; so is a screen that does not read, or that names gaits outside
+    ``gaits``."""
     if text is None:
         return None
     pairs: list[tuple[str, str]] = []
     for item in (part.strip() for part in text.split(",") if part.strip()):
-        if "-" in item:
+        if item.startswith(SCREEN_PREFIX):
+            pairs += _pairs_that_fell(item.removeprefix(SCREEN_PREFIX), gaits, identities=identities)
+        elif "-" in item:
             m, n = (side.strip() for side in item.split("-", 1))
             if not (m and n):
                 raise OptionError(f"--pairs '{text}': '{item}' is not a pair; give pairs like trot-stand")
@@ -232,6 +240,28 @@ def parse_pairs(text: str | None, gaits: list[str]) -> tuple[tuple[str, str], ..
     if not pairs:
         raise OptionError(f"--pairs '{text}' names no pair; give pairs like trot-stand,pace-stand")
     return tuple(dict.fromkeys(pairs))
+
+
+SCREEN_PREFIX = "fell:"
+"""``--pairs fell:FILE``: the pairs in which a switch of the transition file FILE fell."""
+
+
+def _pairs_that_fell(path: str, gaits: list[str], *,
+                     identities: Mapping[str, str] | None) -> list[tuple[str, str]]:
+    from gaitlib.errors import GaitlibError
+    from gaitlib.transitions.combine import pairs_that_fell
+
+    if identities is None:
+        raise OptionError(f"--pairs {SCREEN_PREFIX}{path}: this command takes no screen; name the pairs")
+    try:
+        fell = pairs_that_fell(Path(path), current=identities, falls=DEFAULT_FALLS)
+    except GaitlibError as error:
+        raise OptionError(f"--pairs {SCREEN_PREFIX}{path}: {error}") from None
+    outside = sorted({g for pair in fell for g in pair if g not in gaits})
+    if outside:
+        raise OptionError(f"--pairs {SCREEN_PREFIX}{path}: the screen holds gaits {', '.join(outside)}, "
+                          "not in use here")
+    return list(fell)
 
 
 def parse_magnitudes(text: str) -> tuple[float, ...]:

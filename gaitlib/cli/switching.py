@@ -170,8 +170,9 @@ def benchmark_command(
     ),
     samples: int = bounded(100, "--samples", help="Transitions per (strategy, pair, magnitude) cell;", bounds=COUNT),
     pairs: str | None = typer.Option(
-        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all); the switching models need to "
-        "drive these alone, unless --guard or --routed (they switch among every gait)."
+        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand (default: all; fell:FILE: the pairs in which a "
+        "switch of the transition file FILE fell); the switching models need to drive these alone, unless --guard or "
+        "--routed (they switch among every gait)."
     ),
     out: Path = typer.Option(Path("benchmark"), "--out", help="Output folder (resumed if it holds results)."),
     worlds: int = bounded(256, "--worlds", help="Parallel worlds;", bounds=WORLDS),
@@ -227,7 +228,7 @@ def benchmark_command(
     check_worlds("--worlds", worlds, backend=backend)
     swept = parse_magnitudes(magnitudes)
     setup = load_switching(library)
-    served = parse_pairs(pairs, list(setup.gaits))
+    served = parse_pairs(pairs, list(setup.gaits), identities=setup.resources.library.identities())
     if served is not None and not (guard or guard_margin is not None or routed):
         setup = setup.serving(served)  # models fitted on these pairs alone will do (not for a guard or routes)
     names = tuple(s.strip() for s in strategies.split(",") if s.strip())

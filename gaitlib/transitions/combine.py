@@ -27,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
+from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
 from gaitlib.library.layout import gait_order
 from gaitlib.transitions.schema import TransitionBatch, TransitionData, TransitionFileInfo, TransitionHeader, read
 
-__all__ = ["read_all"]
+__all__ = ["pairs_that_fell", "read_all"]
 
 
 def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None,
@@ -110,6 +111,19 @@ def read_all(paths: Sequence[Path], *, current: Mapping[str, str] | None = None,
         tuple(file for part in parts for file in part.info.files),
     )
     return TransitionData(info, samples)
+
+
+def pairs_that_fell(path: Path, *, current: Mapping[str, str], falls: Falls) -> tuple[tuple[str, str], ...]:
+    """The ordered pairs, as (source, destination) names in the file's order, in which at least one switch of the
+    transition file ``path`` fell (labels by ``falls``): a short screen's pairs that need a full collection, where a
+    pair whose every screened switch stayed up does not (``docs/transitions.md``, "Growing by extension"). Samples of
+    pairs collected with other policies than ``current``'s (gait name -> library identity) are left out, as
+    :func:`read_all` leaves them."""
+    data = read_all([path], current=current).labelled(falls)
+    samples, gaits = data.samples, data.header.gaits
+    failed = ~samples.success.astype(bool)
+    fell = sorted(set(zip(samples.source[failed].tolist(), samples.dest[failed].tolist(), strict=True)))
+    return tuple((gaits[m], gaits[n]) for m, n in fell)
 
 
 def _first_per_pair(samples: TransitionBatch, rows: np.ndarray, count: int) -> np.ndarray:
