@@ -92,7 +92,8 @@ class SwitchResources:
 
     @property
     def net(self):
-        """The library's transition-net (:class:`~gaitlib.transition_net.TransitionNet`, eval mode)."""
+        """The library's transition-net (:class:`~gaitlib.transition_net.TransitionNet`, or the
+        :class:`~gaitlib.transition_net.ComposedNet` of a library grown by ``gaitlib fit --extend``; eval mode)."""
         if "net" not in self._cache:
             from gaitlib.transition_net import load_net
 

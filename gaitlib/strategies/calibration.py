@@ -14,6 +14,7 @@ finite parameters. It is fitted on collection data, never on benchmark runs, and
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +28,7 @@ from gaitlib.library.layout import check_identities
 from gaitlib.transition_net import TransitionNet, batch_features
 from gaitlib.transitions import TransitionData
 
-__all__ = ["Calibration", "calibrate", "load_calibration", "platt", "save_calibration"]
+__all__ = ["Calibration", "calibrate", "load_calibration", "merge_calibrations", "platt", "save_calibration"]
 
 FORMAT = {"format": "gaitlib.calibration", "format_version": 1}
 _EPS = 1e-6
@@ -124,6 +125,32 @@ def calibrate(net: TransitionNet, data: TransitionData, *, train_rows: np.ndarra
     rule = "Platt scaling per ordered pair on held-out rows, classes weighted back to their share of the data"
     return Calibration(tuple(data.header.gaits), dict(identities), pairs, {"pairs": info, "rule": rule,
                                                                            "falls": falls})
+
+
+def merge_calibrations(kept: Calibration, new: Calibration, *, new_pairs: Collection[tuple[str, str]],
+                       gaits: Sequence[str], parts: Sequence[dict]) -> Calibration:
+    """The calibration of a composite transition-net (``gaitlib fit --extend``) over ``gaits`` (the union of the
+    parts', canonical order): the pairs of ``new_pairs`` (names) as ``new`` maps them, every other pair as ``kept``
+    does, its (a, b) copied. ``parts`` is what the info records of each part (the pairs it serves, how it was fitted);
+    the definition of a fall stays at the info's top level. Calibrations of different definitions of a fall, or of
+    another policy of one gait, are refused in one line."""
+    falls = {Falls(c.info.get("falls", Falls.CONTACT)) for c in (kept, new)}
+    if len(falls) != 1:
+        raise TransitionDataError(f"the kept net calibration and the new one follow different definitions of a fall "
+                                  f"({', '.join(sorted(falls))}); they cannot be merged")
+    identities = dict(kept.identities)
+    for gait, identity in new.identities.items():
+        if identities.setdefault(gait, identity) != identity:
+            raise TransitionDataError(f"the kept net calibration and the new one hold different '{gait}' policies")
+    index = {name: i for i, name in enumerate(gaits)}
+    pairs = {}
+    for calibration in (kept, new):
+        for (m, n), ab in calibration.pairs.items():
+            names = (calibration.gaits[m], calibration.gaits[n])
+            if (names in new_pairs) == (calibration is new) and set(names) <= set(index):
+                pairs[(index[names[0]], index[names[1]])] = ab
+    info = {"falls": falls.pop(), "rule": new.info["rule"], "parts": list(parts)}
+    return Calibration(tuple(gaits), {g: identities[g] for g in gaits}, dict(sorted(pairs.items())), info)
 
 
 def save_calibration(path: Path, calibration: Calibration) -> Path:

@@ -6,7 +6,8 @@ strategies' calibrated thresholds, calibrates the net's score to real success ra
 on, and publishes the net of the first kind asked for (``latent`` by default), the TMT, an accuracy report
 (``accuracy.json``) and the calibration (``calibration.json``) together as the library's ``switching/`` folder.
 :func:`evaluate_library` scores the library's net on other data. ``gaitlib fit``, the examples and the tests all
-go through these two functions.
+go through these two functions; ``gaitlib fit --extend`` (:mod:`gaitlib.strategies.extend`) fits the pairs of new
+data alone with :func:`fit_nets` and publishes them beside the library's kept models with :func:`publish_models`.
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from gaitlib.defaults import DEFAULT_FALLS, MIN_PER_LABEL, Falls
 from gaitlib.errors import GaitlibError, TransitionDataError
 from gaitlib.library.layout import ordered_pairs
 from gaitlib.library.store import Library
-from gaitlib.strategies.calibration import calibrate, save_calibration
-from gaitlib.strategies.tmt import build_table, save_table
+from gaitlib.strategies.calibration import Calibration, calibrate, save_calibration
+from gaitlib.strategies.tmt import TransitionTable, build_table, save_table
 from gaitlib.transition_net import (
     EpochStats,
     FitConfig,
@@ -43,6 +44,9 @@ __all__ = [
     "check_validatable",
     "evaluate_library",
     "fit_library",
+    "fit_nets",
+    "publish_fit",
+    "publish_models",
 ]
 
 ACCURACY_FORMAT = {"format": "gaitlib.accuracy", "format_version": 2}
@@ -124,7 +128,8 @@ def fit_library(
     on_epoch: Callable[[str, EpochStats], None] | None = None,
 ) -> FitReport:
     """Fit ``library``'s transition-net (one per kind in ``inputs``; the first is written), TMT and accuracy report
-    on ``data`` (read from ``sources``) and write them into the library.
+    on ``data`` (read from ``sources``) and write them into the library (:func:`fit_nets`, then
+    :func:`publish_fit`).
 
     Refuses, before any work, an unknown input kind and data collected with other policies than the library's
     (:class:`~gaitlib.errors.TransitionDataError`), and data too few to validate (:func:`check_validatable`).
@@ -133,43 +138,76 @@ def fit_library(
     so ``gaitlib library`` then calls it stale and gives the command that measures it again. ``on_epoch(kind,
     stats)`` reports progress.
     """
+    fitted = fit_nets(library, data, sources=sources, inputs=inputs, epochs=epochs, seed=seed, falls=falls,
+                      min_per_label=min_per_label, on_epoch=on_epoch)
+    publish_fit(library, data, fitted)
+    return fitted
+
+
+def fit_nets(
+    library: Library,
+    data: TransitionData,
+    *,
+    sources: Sequence[Path | str],
+    inputs: Sequence[str] = ("latent",),
+    epochs: int = 100,
+    seed: int = 0,
+    falls: Falls = DEFAULT_FALLS,
+    min_per_label: int = MIN_PER_LABEL,
+    on_epoch: Callable[[str, EpochStats], None] | None = None,
+) -> FitReport:
+    """The transition-nets of :func:`fit_library` (one per kind in ``inputs``), fitted and reported, nothing
+    written; refused as :func:`fit_library` refuses."""
     check_input_kinds(inputs)
-    identities = _checked_identities(library, data, sources)
+    _checked_identities(library, data, sources)
     check_validatable(data, falls=falls, min_per_label=min_per_label)
     results = {}
     for kind in dict.fromkeys(inputs):
         report = None if on_epoch is None else (lambda stats, kind=kind: on_epoch(kind, stats))
         results[kind] = fit(data, FitConfig(kind=kind, epochs=epochs, seed=seed, falls=falls), on_epoch=report)
-    written = next(iter(results.values()))
     names = data.header.gaits
     covered = {f"{names[m]}-{names[n]}" for m, n in data.samples.pairs()}
-    fitted = FitReport(
+    return FitReport(
         data=tuple(map(str, sources)),
         samples=len(data.samples),
         results=results,
-        written=tuple(
-            f"{Library.SWITCHING}/{name}"
-            for name in (Library.NET, Library.TMT, Library.ACCURACY, Library.CALIBRATION, Library.CHECKSUMS)
-        ),
+        written=tuple(f"{Library.SWITCHING}/{name}" for name in (*Library.BUNDLE, Library.CHECKSUMS)),
         uncovered=tuple(pair for pair in ordered_pairs(library.gaits()) if pair not in covered),
         note=data.info.note,
         falls=falls,
         data_sha256=tuple(content for _, content in data.info.files),
     )
-    labelled = data.labelled(falls)
-    calibration = calibrate(written.net, labelled, train_rows=written.split.train, identities=identities, falls=falls)
+
+
+def publish_fit(library: Library, data: TransitionData, fitted: FitReport) -> None:
+    """Calibrate the first net of ``fitted`` (fitted on ``data``) on the rows it did not train on, build the TMT of
+    ``data``, and publish them with the net and the accuracy report as ``library``'s switching models."""
+    written = next(iter(fitted.results.values()))
+    identities = dict(zip(data.header.gaits, data.header.identities, strict=True))
+    labelled = data.labelled(fitted.falls)
+    calibration = calibrate(written.net, labelled, train_rows=written.split.train, identities=identities,
+                            falls=fitted.falls)
+    table = build_table(labelled, identities=identities, source=", ".join(fitted.data), falls=fitted.falls)
+    publish_models(library, net=lambda path: save_net(path, written), table=table, accuracy=fitted.as_dict(),
+                   calibration=calibration)
+
+
+def publish_models(library: Library, *, net: Callable[[Path], object], table: TransitionTable, accuracy: dict,
+                   calibration: Calibration) -> None:
+    """Write the switching models into ``library`` together, or none of them: the net (``net(path)`` writes it),
+    the TMT, the accuracy report (``accuracy.json``'s content) and the calibration, with their checksum list. The
+    route table and survival estimate there are kept (made with the old models, each then reads as stale where it
+    is, never as missing)."""
     with library.publish_switching() as staging:  # the four replace the library's together, or none does
-        save_net(staging / Library.NET, written)
-        table = build_table(labelled, identities=identities, source=", ".join(fitted.data), falls=falls)
+        net(staging / Library.NET)
         save_table(staging / Library.TMT, table)
-        write_json(staging / Library.ACCURACY, fitted.as_dict(), checksum=True)
+        write_json(staging / Library.ACCURACY, accuracy, checksum=True)
         save_calibration(staging / Library.CALIBRATION, calibration)
-        for kept in (Library.ROUTES, Library.SURVIVAL):  # made with the old models or policies: kept, so that
-            if (library.switching_dir / kept).is_file():  # each reads as stale where it is, never as missing
+        for kept in (Library.ROUTES, Library.SURVIVAL):
+            if (library.switching_dir / kept).is_file():
                 shutil.copy2(library.switching_dir / kept, staging / kept)
         library.write_checksums(staging, survival=_listed_survival(library) if (staging / Library.SURVIVAL).is_file()
                                 else None)
-    return fitted
 
 
 def _listed_survival(library: Library) -> str | None:

@@ -18,7 +18,9 @@ Written into one folder:
   1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
 
 An estimate that reads the critic's value is refused in one line: the critic sees privileged simulator quantities a
-robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``).
+robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``), and
+so is a composite transition-net (a library grown by ``gaitlib fit --extend``), which routes each pair to the net
+fitted on it: ``net.onnx`` is one net's graph.
 ``imu`` is deployable: a robot's IMU gives it (the accelerometer less the gravity its attitude estimate gives, or
 the change of the estimated trunk velocity over the control step, divided by the step, in the trunk's frame).
 """
@@ -36,6 +38,7 @@ from gaitlib.evaluation import SECTORS
 from gaitlib.strategies.base import phase_grid
 from gaitlib.strategies.calibration import Calibration
 from gaitlib.strategies.survival import SurvivalEstimate, check_finite
+from gaitlib.transition_net.composed import ComposedNet
 from gaitlib.transition_net.model import TransitionNet
 
 __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
@@ -66,11 +69,15 @@ def _export(module: torch.nn.Module, width: int, path: Path, *, inputs: str, out
                           dynamic_axes={inputs: {0: "batch"}, output: {0: "batch"}}, dynamo=False)
 
 
-def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, net: TransitionNet,
+def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, net: TransitionNet | ComposedNet,
                  calibration: Calibration) -> Path:
     """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
     :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
-    ``guard.json``. An estimate that is not finite is refused before anything is written."""
+    ``guard.json``. An estimate that is not finite, and a composite transition-net (``gaitlib fit --extend``: its
+    routing by pair is not one ONNX graph), are refused in one line before anything is written."""
+    if isinstance(net, ComposedNet):
+        raise GaitlibError(f"the transition-net is a composite of {len(net.parts)} parts (gaitlib fit --extend), and "
+                           "the exported guard takes one net: fit every pair into one (gaitlib fit without --extend)")
     check_finite(estimate)
     if tuple(estimate.inputs) not in DEPLOYABLE_INPUTS:
         raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "

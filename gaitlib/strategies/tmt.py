@@ -14,6 +14,7 @@ transition-net, refused at load time when the library's policies are not the one
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -37,6 +38,7 @@ __all__ = [
     "best_threshold",
     "build_table",
     "load_table",
+    "merge_tables",
     "save_table",
 ]
 
@@ -107,11 +109,14 @@ def sample_scores(table: TransitionTable, data: TransitionData) -> dict[str, np.
 
 
 def build_table(
-    data: TransitionData, *, identities: dict[str, str], source: str, falls: Falls, bins: int = PHASE_GRID
+    data: TransitionData, *, identities: dict[str, str], source: str, falls: Falls, bins: int = PHASE_GRID,
+    typical_value: Mapping[str, float] | None = None,
 ) -> TransitionTable:
     """Count ``data``'s outcomes into a TMT, measure typical values and calibrate the thresholds; ``source`` says
     where the data came from and ``falls`` the definition of a fall its ``success`` labels follow (both kept in
-    the table's info)."""
+    the table's info). ``typical_value``: gait name -> the critic value to use as that gait's typical value instead
+    of the data's mean (an extension keeps the library's, so that the new pairs' thresholds are calibrated against
+    the values the merged table divides by)."""
     x, gaits = data.samples, tuple(data.header.gaits)
     g = len(gaits)
     if len(x) == 0:
@@ -131,6 +136,8 @@ def build_table(
     for i in range(g):
         values = x.value_source[x.source == i]
         table.typical_value[i] = float(values.mean()) if len(values) else 1.0
+        if typical_value is not None and gaits[i] in typical_value:
+            table.typical_value[i] = float(typical_value[gaits[i]])
     scores = sample_scores(table, data)
     pairs = x.pairs()
     for name in CALIBRATED:
@@ -148,6 +155,49 @@ def build_table(
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     return table
+
+
+def merge_tables(kept: TransitionTable, new: TransitionTable, *, new_pairs: Collection[tuple[str, str]],
+                 gaits: Sequence[str], parts: Sequence[dict]) -> TransitionTable:
+    """The TMT of a composite transition-net (``gaitlib fit --extend``) over ``gaits`` (the union of the parts',
+    canonical order): the successes, counts and thresholds of the pairs of ``new_pairs`` (names) from ``new``, those
+    of every other pair from ``kept``, copied; each gait's typical value from ``kept`` where it has the gait, else
+    from ``new``. ``parts`` is what the info records of each part; the definition of a fall and the bins stay at its
+    top level. Tables of other phase bins, definitions of a fall or policies of one gait are refused in one line."""
+    if kept.bins != new.bins:
+        raise TransitionDataError(f"the kept TMT has {kept.bins} phase bins a cycle and the new one {new.bins}; they "
+                                  "cannot be merged")
+    falls = {Falls(t.info.get("falls", Falls.CONTACT)) for t in (kept, new)}
+    if len(falls) != 1:
+        raise TransitionDataError(f"the kept TMT and the new one follow different definitions of a fall "
+                                  f"({', '.join(sorted(falls))}); they cannot be merged")
+    identities = dict(kept.identities)
+    for gait, identity in new.identities.items():
+        if identities.setdefault(gait, identity) != identity:
+            raise TransitionDataError(f"the kept TMT and the new one hold different '{gait}' policies")
+    index, g = {name: i for i, name in enumerate(gaits)}, len(gaits)
+    valued = [kept if name in kept.gaits else new for name in gaits]  # the table each typical value comes from
+    merged = TransitionTable(
+        gaits=tuple(gaits),
+        identities={name: identities[name] for name in gaits},
+        successes=np.zeros((g, g, kept.bins, kept.bins), dtype=np.int64),
+        counts=np.zeros((g, g, kept.bins, kept.bins), dtype=np.int64),
+        typical_value=np.array([t.typical_value[t.gaits.index(name)] for t, name in zip(valued, gaits, strict=True)]),
+        thresholds={name: {} for name in CALIBRATED},
+        info={"falls": falls.pop(), "bins": kept.bins, "score": new.info["score"],
+              "calibration": new.info["calibration"], "parts": list(parts),
+              "created": datetime.now(UTC).isoformat(timespec="seconds")},
+    )
+    for table in (kept, new):
+        for i, m in enumerate(table.gaits):
+            for j, n in enumerate(table.gaits):
+                if ((m, n) in new_pairs) == (table is new) and m != n and m in index and n in index:
+                    merged.successes[index[m], index[n]] = table.successes[i, j]
+                    merged.counts[index[m], index[n]] = table.counts[i, j]
+                    for name in CALIBRATED:
+                        if (i, j) in table.thresholds[name]:
+                            merged.thresholds[name][(index[m], index[n])] = table.thresholds[name][(i, j)]
+    return merged
 
 
 def save_table(path: Path, table: TransitionTable) -> Path:
