@@ -55,14 +55,18 @@ def library_command(
     if status.bundle is not None:
         b = status.bundle
         data = ", ".join(d["path"] for d in b.data)
-        pairs = Table(title=f"switching models (inputs {', '.join(b.inputs)}; fitted on {escape(data)})")
-        for column in ("pair", "state", "samples", "net accuracy"):
+        fits = len(set(b.parts.values()))
+        composite = (f"; {fits} fits kept together by gaitlib fit --extend, 'fit' the one serving a pair, the last "
+                     "the newest") if b.parts else ""
+        pairs = Table(title=f"switching models (inputs {', '.join(b.inputs)}; fitted on {escape(data)}{composite})")
+        for column in ("pair", "state", "samples", "net accuracy", *(("fit",) if b.parts else ())):
             pairs.add_column(column, justify="left" if column in ("pair", "state") else "right")
         for pair, state in status.pairs.items():
             samples = b.pair_samples.get(pair)
             accuracy = b.accuracy.get(pair)
+            part = (f"{b.parts[pair]} of {fits}" if pair in b.parts else "-",) if b.parts else ()
             pairs.add_row(pair, state, "-" if samples is None else f"{samples:,}",
-                          "-" if accuracy is None or state != "covered" else f"{100 * accuracy:.1f}%")
+                          "-" if accuracy is None or state != "covered" else f"{100 * accuracy:.1f}%", *part)
         console.print(pairs)
     if routes is not None and routes["state"] == "current":
         detours = "; ".join(f"{pair} through {' -> '.join(path)}" for pair, path in routes["detours"].items())

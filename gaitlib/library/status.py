@@ -81,6 +81,9 @@ class Bundle:
     falls: dict[str, Falls]
     """File name -> the definition of a fall its labels followed (files from before it was recorded: ``contact``,
     the only one there was)."""
+    parts: dict[str, int] = field(default_factory=dict)
+    """``"m-n"`` -> the part of a composite transition-net that serves it (1, 2, ...: the order of the fits, the
+    last the newest; ``gaitlib fit --extend``); empty for one net, which serves every pair."""
 
 
 @dataclass(frozen=True)
@@ -136,8 +139,10 @@ class LibraryStatus:
                 "gaits": list(self.bundle.gaits),
                 "inputs": list(self.bundle.inputs),
                 "data": [d["path"] for d in self.bundle.data],
+                "parts": len(set(self.bundle.parts.values())) or 1,
                 "pairs": {
-                    p: {"state": s, "samples": self.bundle.pair_samples.get(p), "accuracy": self.bundle.accuracy.get(p)}
+                    p: {"state": s, "samples": self.bundle.pair_samples.get(p), "accuracy": self.bundle.accuracy.get(p),
+                        "part": self.bundle.parts.get(p)}
                     for p, s in self.pairs.items()
                 },
             },
@@ -237,6 +242,7 @@ def read_bundle(library: Library) -> Bundle:
                 Library.CALIBRATION: Falls(records[Library.CALIBRATION]["info"].get("falls", Falls.CONTACT)),
                 Library.ACCURACY: Falls(accuracy.get("falls", Falls.CONTACT)),
             },
+            parts={str(pair): k + 1 for k, part in enumerate(net.get("parts", ())) for pair in part["pairs"]},
         )
     except (KeyError, TypeError, ValueError, IndexError) as error:
         raise GaitlibError(f"the switching models in {folder} are damaged ({type(error).__name__}: {error})") from None
