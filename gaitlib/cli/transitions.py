@@ -231,21 +231,27 @@ def fit_command(
         "a shorter collection with the same seed holds them (default: every sample; docs/transitions.md, \"The "
         "switch-success budget\");", bounds=Bounds(low=1, high=1e8, whole=True),
     ),
+    extend: bool = typer.Option(
+        False, "--extend", help="Fit only the pairs the data hold and keep the library's switching models for the "
+        "rest (growth that costs the new pairs only; docs/transitions.md, \"Growing by extension\")."
+    ),
 ) -> None:
     """Fit the transition-net (balanced per pair, held-out balanced validation) and the TMT with its calibrated
-    thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes)."""
+    thresholds, and write both to the library; the labels follow --falls (every sample holds both outcomes). With
+    --extend, only the pairs of the data are fitted, and the library's models kept for the others."""
     from gaitlib.cli.preflight import no_effect, writing_library
     from gaitlib.library import Library
     from gaitlib.library.target import check_library, copy_library, library_writer
+    from gaitlib.strategies.extend import extend_library, kept_models
     from gaitlib.strategies.fitting import check_validatable, evaluate_library, fit_library
     from gaitlib.transition_net import INPUT_KINDS, check_input_kinds
     from gaitlib.transitions import read_all
 
-    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve", "per_pair"),
-              when=evaluate,
+    no_effect(ctx, ("replace", "ablation", "epochs", "seed", "input_kind", "min_per_label", "curve", "per_pair",
+                    "extend"), when=evaluate,
               because="with --evaluate (it scores the library's net and fits nothing)")
     if curve is not None:
-        no_effect(ctx, ("replace", "ablation", "min_per_label", "per_pair"), when=True,
+        no_effect(ctx, ("replace", "ablation", "min_per_label", "per_pair", "extend"), when=True,
                   because="with --curve (it fits into no library)")
         _curve(data, curve, library=library, input_kind=input_kind, epochs=epochs, seed=seed, falls=falls,
                as_json=as_json)
@@ -258,6 +264,8 @@ def fit_command(
     check_input_kinds((input_kind,))  # before the library is copied
     target, copy_from = writing_library(library, replace=replace, command="gaitlib fit", what="the switching models")
     check_library(copy_from or target, command="gaitlib fit")
+    if extend:  # no, damaged or stale models to keep, or of another input or falls: refused before any copy
+        kept_models(Library(copy_from or target), input_kind=input_kind, falls=falls)
     samples = read_all(data, current=Library(copy_from or target).identities(), per_pair=per_pair)  # foreign: refused
     check_validatable(samples, falls=falls, min_per_label=min_per_label)  # too few to validate: refused here too
     inputs = (input_kind, *(k for k in INPUT_KINDS if k != input_kind)) if ablation else (input_kind,)
@@ -265,12 +273,15 @@ def fit_command(
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib fit"):
         lib = Library(target)
-        report = fit_library(lib, samples, sources=data, inputs=inputs, epochs=epochs, seed=seed, falls=falls,
-                             min_per_label=min_per_label)
+        report = (extend_library if extend else fit_library)(lib, samples, sources=data, inputs=inputs, epochs=epochs,
+                                                             seed=seed, falls=falls, min_per_label=min_per_label)
     _report(report.as_dict(), as_json)
     if not as_json:
         if report.note:
             print(f"data: {report.note}")
+        if extend:
+            for by, what in (("kept", "the library's kept models"), ("new", "the new fit")):
+                print(f"served by {what}: {', '.join(p for p, s in report.served.items() if s == by) or 'none'}")
         uncovered = ", ".join(report.uncovered) or "none"
         print(f"wrote {lib.switching_dir}; pairs of the library it does not cover: {uncovered}")
         if (lib.switching_dir / Library.ROUTES).is_file():
