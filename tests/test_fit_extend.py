@@ -15,9 +15,17 @@ import torch
 from cli_runner import gaitlib, gaitlib_quick
 from conftest import built_once, copy_library
 
-from gaitlib.errors import GaitlibError, TransitionDataError
+from gaitlib.errors import TransitionDataError
 from gaitlib.library import Library
-from gaitlib.transition_net import ComposedNet, FeatureSpec, NetPart, TransitionNet, load_net, save_composed
+from gaitlib.transition_net import (
+    ComposedNet,
+    FeatureSpec,
+    NetPart,
+    TransitionNet,
+    build_features,
+    load_net,
+    save_composed,
+)
 from gaitlib.transitions import read_all
 
 NEW_PAIRS = {"pace-stand", "pace-trot", "stand-pace", "trot-pace"}
@@ -239,7 +247,6 @@ def test_extension_refusals_are_one_line_and_write_nothing(grown, tiny_library, 
 
 
 def test_a_damaged_composite_is_refused_in_one_line(grown, tmp_path) -> None:
-    from gaitlib.strategies.guard_export import export_guard
     from gaitlib.transition_net import load_parts
 
     library = _copy(grown, tmp_path)
@@ -284,6 +291,32 @@ def test_a_damaged_composite_is_refused_in_one_line(grown, tmp_path) -> None:
     with pytest.raises(TransitionDataError, match="no part of the composite transition-net was fitted on pair"):
         composite.score(source=torch.tensor([1]), dest=torch.tensor([1]), phase_dest=torch.zeros(1),
                         latent=torch.zeros(1, composite.spec.latent_dim))
-    with pytest.raises(GaitlibError, match=r"is a composite of 2 parts .* the exported guard takes one net"):
-        export_guard(tmp_path / "guard", policies=[], estimate=None, net=composite, calibration=None)
-    assert not (tmp_path / "guard").exists()
+
+
+def test_a_composite_exports_as_one_graph_with_each_pairs_own_logit(grown, tmp_path) -> None:
+    """The guard's deployable ``net.onnx`` of a grown library: every served pair scores as its part does, through
+    onnxruntime; a pair no part serves scores minus infinity (never switched to)."""
+    import onnxruntime
+
+    from gaitlib.strategies.guard_export import _DenseComposite, _export
+
+    library = _copy(grown, tmp_path)
+    assert _extend(library, grown / "pace.h5").returncode == 0
+    composite = load_net(library.net_path, identities=library.identities()).net
+    assert isinstance(composite, ComposedNet)
+    g = len(composite.spec.gaits)
+    served = [(m, n) for m in range(g) for n in range(g) if m != n]
+    rows = torch.tensor(served * 8)
+    generator = torch.Generator().manual_seed(0)
+    latent = torch.randn(len(rows), composite.spec.latent_dim, generator=generator)
+    features = build_features(composite.spec, source=rows[:, 0], dest=rows[:, 1],
+                              phase_dest=torch.rand(len(rows), generator=generator), latent=latent)
+    expected = composite.eval()(features).detach()
+    _export(_DenseComposite(composite), composite.spec.dim, tmp_path / "net.onnx", inputs="features", output="logit")
+    session = onnxruntime.InferenceSession(str(tmp_path / "net.onnx"), providers=["CPUExecutionProvider"])
+    (logit,) = session.run(None, {"features": features.numpy()})
+    torch.testing.assert_close(torch.from_numpy(logit), expected, rtol=1e-5, atol=1e-5)
+    own = build_features(composite.spec, source=torch.tensor([1]), dest=torch.tensor([1]), phase_dest=torch.zeros(1),
+                         latent=torch.zeros(1, composite.spec.latent_dim))
+    (unserved,) = session.run(None, {"features": own.numpy()})
+    assert unserved[0] == -np.inf

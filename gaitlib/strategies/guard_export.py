@@ -9,7 +9,10 @@ Written into one folder:
   and cos of 2 pi phase, then the trunk's acceleration in its own frame, gravity left out, m/s^2) to its logit
   (standardization included);
 * ``net.onnx``: the transition-net's inputs (N, 2G + L + 2: one-hot m, one-hot n, psi_m, sin and cos of 2 pi phi_n)
-  to its logit;
+  to its logit; a composite net (a library grown by ``gaitlib fit --extend``) is one graph too: every part scores
+  every row on its own one-hot blocks (the union's one-hot times a 0/1 matrix), and the row keeps the logit of the
+  part that serves its pair (a 0/1 mask from m and n), plus log of the mask's sum, 0 there: a pair no part serves
+  scores minus infinity, a switch never made;
 * ``guard.json``: the gaits, the policies' identities, the estimate's inputs, horizon, margin, floor, the time from an
   episode's start before which it does not act (``armed_from_s``, s), the catch table (``catch_into``: running
   gait -> sector of ``sectors`` the trunk's acceleration points to -> the gait it is caught into; a gait or sector
@@ -18,9 +21,7 @@ Written into one folder:
   1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
 
 An estimate that reads the critic's value is refused in one line: the critic sees privileged simulator quantities a
-robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``), and
-so is a composite transition-net (a library grown by ``gaitlib fit --extend``), which routes each pair to the net
-fitted on it: ``net.onnx`` is one net's graph.
+robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``).
 ``imu`` is deployable: a robot's IMU gives it (the accelerometer less the gravity its attitude estimate gives, or
 the change of the estimated trunk velocity over the control step, divided by the step, in the trunk's frame).
 """
@@ -61,6 +62,32 @@ class _Latent(torch.nn.Module):
         return self.hidden(self.normalizer(obs))
 
 
+class _DenseComposite(torch.nn.Module):
+    """A :class:`ComposedNet` as one graph of dense operations (module doc): the same logits, no routing by index."""
+
+    def __init__(self, net: ComposedNet) -> None:
+        super().__init__()
+        self.parts = net.parts
+        self.g = len(net.spec.gaits)
+        for k, part in enumerate(net.parts):
+            encode = torch.zeros(self.g, len(part.spec.gaits))  # the union's one-hot -> the part's
+            for i, name in enumerate(part.spec.gaits):
+                encode[net.spec.gaits.index(name), i] = 1.0
+            self.register_buffer(f"encode_{k}", encode)
+            self.register_buffer(f"served_{k}", (net.part_of.cpu() == k).float())  # (G, G): 1 where k serves m -> n
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        g = self.g
+        source, dest, rest = features[:, :g], features[:, g:2 * g], features[:, 2 * g:]
+        logit, total = torch.zeros_like(features[:, 0]), torch.zeros_like(features[:, 0])
+        for k, part in enumerate(self.parts):
+            encode, served = getattr(self, f"encode_{k}"), getattr(self, f"served_{k}")
+            mask = ((source @ served) * dest).sum(-1)
+            logit = logit + mask * part(torch.cat([source @ encode, dest @ encode, rest], dim=-1))
+            total = total + mask
+        return logit + torch.log(total)
+
+
 def _export(module: torch.nn.Module, width: int, path: Path, *, inputs: str, output: str) -> None:
     with atomic_path(path) as tmp, warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=DeprecationWarning)  # the TorchScript exporter, on purpose
@@ -73,11 +100,7 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
                  calibration: Calibration) -> Path:
     """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
     :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
-    ``guard.json``. An estimate that is not finite, and a composite transition-net (``gaitlib fit --extend``: its
-    routing by pair is not one ONNX graph), are refused in one line before anything is written."""
-    if isinstance(net, ComposedNet):
-        raise GaitlibError(f"the transition-net is a composite of {len(net.parts)} parts (gaitlib fit --extend), and "
-                           "the exported guard takes one net: fit every pair into one (gaitlib fit without --extend)")
+    ``guard.json``. An estimate that is not finite is refused in one line before anything is written."""
     check_finite(estimate)
     if tuple(estimate.inputs) not in DEPLOYABLE_INPUTS:
         raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "
@@ -101,7 +124,8 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
 
     _export(_Logit(estimate.net).cpu(), int(estimate.net.mean.numel()), folder / "survival.onnx",
             inputs="features", output="logit")
-    _export(_Logit(net).cpu(), net.spec.dim, folder / "net.onnx", inputs="features", output="logit")
+    graph = _DenseComposite(net) if isinstance(net, ComposedNet) else _Logit(net)
+    _export(graph.cpu(), net.spec.dim, folder / "net.onnx", inputs="features", output="logit")
     return write_json(folder / "guard.json", _FORMAT | {
         "gaits": list(gaits),
         "library_identities": estimate.identities,
