@@ -50,3 +50,21 @@ def test_a_screen_is_refused_where_no_library_is_given_or_the_file_does_not_read
         parse_pairs(f"fell:{junk}", library.gaits(), identities=library.identities())
     with pytest.raises(OptionError, match="fell:"):
         parse_pairs(f"fell:{tmp_path / 'missing.h5'}", library.gaits(), identities=library.identities())
+
+
+def test_collect_takes_the_pairs_that_fell_in_a_screen(switching_library, tmp_path):
+    from cli_runner import gaitlib_quick
+
+    library = Library(switching_library)
+    screen = _screen(switching_library)
+    expected = parse_pairs(f"fell:{screen}", library.gaits(), identities=library.identities())
+    out = tmp_path / "top-up.h5"
+    done = gaitlib_quick("collect", "--library", str(library.root), "--pairs", f"fell:{screen}", "--samples", "8",
+                         "--worlds", "8", "--horizon", "1.0", "--backend", "mujoco", "--seed", "3", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    data = read(out)
+    gaits = data.header.gaits
+    assert {(gaits[m], gaits[n]) for m, n in data.samples.pairs()} == set(expected)
+    refused = gaitlib_quick("collect", "--library", str(library.root), "--pairs", f"fell:{tmp_path / 'none.h5'}",
+                            "--samples", "8", "--out", str(tmp_path / "other.h5"))
+    assert refused.returncode == 2 and "fell:" in refused.stderr and not (tmp_path / "other.h5").exists()

@@ -41,7 +41,8 @@ def collect_command(
     ),
     gaits: str | None = typer.Option(None, "--gaits", help="Comma-separated gaits (default: every library entry)."),
     pairs: str | None = typer.Option(
-        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it."
+        None, "--pairs", help="Ordered pairs like trot-stand,pace-stand; a bare gait name: every pair with it; "
+        "fell:FILE: every pair in which a switch of the transition file FILE (a screen of this library) fell."
     ),
     push_max: float = bounded(0.0, "--push-max", help="Largest random push (0: none);", bounds=PUSH_N),
     horizon: float | None = bounded(
@@ -92,7 +93,7 @@ def collect_command(
         num_worlds=worlds,
         protocol=TrialProtocol.collection(**({} if horizon is None else {"horizon_s": horizon})),
         push_max=push_max,
-        pairs=parse_pairs(pairs, names),
+        pairs=parse_pairs(pairs, names, identities=lib.identities()),
         backend=backend,
         seed=seed,
         chunk=chunk,
