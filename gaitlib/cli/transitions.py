@@ -341,16 +341,18 @@ def _report(report: dict, as_json: bool) -> None:
     rows = report.get("balanced_validation_accuracy") or {"library net": report["accuracy"]}
     pairs = [p for p in PAPER_PAIRS if any(p in r for r in rows.values())]
     pairs += sorted({p for r in rows.values() for p in r} - set(pairs))
-    table = Table(title=f"balanced accuracy (%) per ordered pair (paper Table 3 layout), labels by the "
+    table = Table(title=f"balanced accuracy (%) per ordered pair (paper Table 3, one row a pair), labels by the "
                         f"{report.get('falls', 'trunk')} definition of a fall")
-    table.add_column("input")
-    for pair in pairs:
-        table.add_column(pair, justify="right")
+    table.add_column("pair")
+    columns = []
     for kind, accuracy in rows.items():
-        table.add_row(kind, *(f"{100 * accuracy[p]:.2f}" if p in accuracy else "-" for p in pairs))
+        columns.append(accuracy)
+        table.add_column(kind, justify="right")
         if kind in PAPER_TABLE_3:
-            paper = dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True))
-            table.add_row(f"  paper {kind}", *(f"{100 * paper[p]:.2f}" if p in paper else "-" for p in pairs))
+            columns.append(dict(zip(PAPER_PAIRS, PAPER_TABLE_3[kind], strict=True)))
+            table.add_column(f"paper {kind}", justify="right")
+    for pair in pairs:
+        table.add_row(pair, *(f"{100 * column[pair]:.2f}" if pair in column else "-" for column in columns))
     table_console().print(table)
 
 
