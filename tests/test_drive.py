@@ -1,5 +1,6 @@
 """``gaitlib drive``: a command timeline on the real simulator with the shipped library, the nearest skill, the
-switch through the meta-controller, the commanded path, the waypoint rule, and bad input refused in one line."""
+switch through the meta-controller, the commanded path, and bad input refused in one line (the closed loop to
+waypoints: ``test_drive_closed_loop.py``)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 from cli_runner import gaitlib, gaitlib_quick
 
-from gaitlib.meta.commands import Commands, Skill, waypoint_commands
+from gaitlib.meta.commands import Commands
 
 SHIPPED = Path(__file__).resolve().parents[1] / "library"
 HEADER = "time_s,forward,lateral,yaw_rate\n"
@@ -87,20 +88,6 @@ def test_the_commanded_path_integrates_lines_and_arcs() -> None:
     assert path[-1] == pytest.approx([2.3, 1.0, math.pi / 2], abs=2e-3)
 
 
-def test_waypoints_turn_in_place_then_go_straight() -> None:
-    skills = [Skill("stand", (0.0, 0.0, 0.0)), Skill("trot", (1.45, 0.0, 0.0)), Skill("pronk", (0.5, 0.0, 0.0)),
-              Skill("trot_left", (0.5, 0.0, 0.5)), Skill("turn_left", (0.0, 0.0, 1.0))]
-    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [0.0, 0.0]])
-    commands = waypoint_commands(square, skills)
-    # ahead with the slowest straight skill, then a quarter turn in place with the only turner, and so on
-    assert commands.velocity.tolist() == [[0.5, 0, 0], *[[0, 0, 1.0], [0.5, 0, 0]] * 3]
-    assert np.diff(commands.time_s) == pytest.approx([4.0, *[math.pi / 2, 4.0] * 3])
-    assert commands.path(0.01)[-1] == pytest.approx([0.0, 0.0, 1.5 * math.pi], abs=1e-6)
-    right = waypoint_commands(np.array([[0.0, 0.0], [0.0, -1.0]]), skills)  # a right turn the long way round
-    assert np.diff(right.time_s)[0] == pytest.approx(1.5 * math.pi) and right.path(0.01)[-1][:2] == pytest.approx(
-        [0.0, -1.0], abs=1e-6)
-
-
 @pytest.mark.parametrize(
     ("name", "text", "says"),
     [
@@ -127,7 +114,8 @@ def test_a_bad_command_timeline_is_one_line_before_any_work(tmp_path, name, text
     ("text", "says"),
     [
         ("x,y\n1,2\n", "at least two points"),
-        ("x,y\n0,0\n0,1\n", "turn 90 degrees at waypoint 1; the library holds no skill that turns in place"),
+        ("x,y\n0,0\n0,1\n", "waypoints need a skill that turns, in place or going ahead, to aim at them again as "
+         "the robot drifts; the library holds none"),
         ("x,y\n0,0\n1,0\n1,0\n", "waypoint 3 is where waypoint 2 is"),
     ],
 )

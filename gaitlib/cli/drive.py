@@ -1,5 +1,6 @@
-"""``gaitlib drive``: one robot steered by a command timeline or through waypoints, each command requesting the
-library's nearest skill through the meta-controller, with the path against the commanded one."""
+"""``gaitlib drive``: one robot steered by a command timeline (open loop, each command requesting the library's
+nearest skill) or through waypoints (closed loop, aimed again every step from the measured pose), through the
+meta-controller, with the path against the commanded one and each waypoint's arrival."""
 
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ def drive_command(
     ),
     waypoints: Path | None = typer.Option(
         None, "--waypoints", help="Waypoints, CSV with the header x,y (m): the first where the robot starts, facing "
-        "+x; it turns in place toward each next point, then goes straight to it (docs/driving.md)."
+        "+x. Closed loop: every step the robot aims again from its measured pose, turning while the waypoint's "
+        "bearing is off and going straight when aligned, until within 0.2 m of each (docs/driving.md)."
     ),
     strategy: str = typer.Option(
         DEFAULT_STRATEGY, "--strategy", help="random, value, tmt, tmt-value, net (the paper's rule) or net-lookahead."
@@ -38,13 +40,14 @@ def drive_command(
     guard: bool = guard_option(),
     guard_margin: float | None = guard_margin_option(),
 ) -> None:
-    """Drive one robot by --commands (or through --waypoints): at each command the skill nearest the commanded
-    velocity is requested and the meta-controller switches to it with --strategy (guarded unless --no-guard)."""
+    """Drive one robot by --commands (open loop: at each command the skill nearest the commanded velocity is
+    requested) or through --waypoints (closed loop: a turning or the straight skill, chosen every step from the
+    measured pose); the meta-controller switches with --strategy (guarded unless --no-guard)."""
     from gaitlib.cli.options import OptionError
     from gaitlib.cli.preflight import plot_and_video
     from gaitlib.meta import load_switching
-    from gaitlib.meta.commands import read_commands, read_waypoints, skills_of, waypoint_commands
-    from gaitlib.meta.drive import drive
+    from gaitlib.meta.commands import read_commands, read_waypoints, skills_of
+    from gaitlib.meta.drive import drive, drive_waypoints
     from gaitlib.meta.drive_plot import plot_drive
     from gaitlib.strategies.survival import check_guard
 
@@ -56,10 +59,13 @@ def drive_command(
     check_guard(margin=guard_margin)
     setup = load_switching(library)
     if points is not None:
-        timeline = waypoint_commands(points, skills_of([e.description for e in setup.entries]))
+        from gaitlib.meta.steering import check_waypoints
+
+        check_waypoints(points, skills_of([e.description for e in setup.entries]))  # before the guard's line
     guarding, unguarded = choose_guard(setup, on=guard, margin=guard_margin, quiet=as_json)
-    result = drive(setup, timeline, strategy=strategy, action_delay=action_delay, backend=backend, seed=seed,
-                   falls=falls, guard=guarding)
+    options = {"strategy": strategy, "action_delay": action_delay, "backend": backend, "seed": seed, "falls": falls,
+               "guard": guarding}
+    result = (drive(setup, timeline, **options) if points is None else drive_waypoints(setup, points, **options))
     plot_drive(result, plot)
     if video is not None:
         from gaitlib.meta.video import render_trace
@@ -75,8 +81,11 @@ def drive_command(
         got = "not run" if achieved is None else (
             f"achieved {achieved['forward']:+.2f} m/s, {achieved['lateral']:+.2f} m/s, {achieved['yaw_rate']:+.2f} "
             "rad/s")
-        print(f"{row['from_s']:7.2f} s  forward {row['forward']:+.2f} m/s, lateral {row['lateral']:+.2f} m/s, yaw rate "
-              f"{row['yaw_rate']:+.2f} rad/s -> {row['skill']} ({row['skill_distance']:.3f} m/s away); {got}")
+        velocity = (f"forward {row['forward']:+.2f} m/s, lateral {row['lateral']:+.2f} m/s, yaw rate "
+                    f"{row['yaw_rate']:+.2f} rad/s")
+        asked = (f"{row['skill']} asked for ({velocity})" if result.waypoints is not None else
+                 f"{velocity} -> {row['skill']} ({row['skill_distance']:.3f} m/s away)")
+        print(f"{row['from_s']:7.2f} s  {asked}; {got}")
     for switch in report["switches"]:
         how = "forced by the deadline" if switch["forced"] else (
             "random: no score" if switch["score"] is None else f"score {switch['score']:.3f}")
@@ -93,8 +102,28 @@ def drive_command(
         print(f"velocity error (rms): forward {error['forward']:.3f} m/s, lateral {error['lateral']:.3f} m/s, yaw rate "
               f"{error['yaw_rate']:.3f} rad/s; {error['distance']:.3f} m/s by the drive's distance")
     print_guard(report["guard"], guarding, trace)
-    print(f"ended {report['end_error_m']:.2f} m from the commanded end of a {report['path_length_m']:.2f} m path")
+    if result.waypoints is None:
+        print(f"ended {report['end_error_m']:.2f} m from the commanded end of a {report['path_length_m']:.2f} m path")
+    else:
+        _print_waypoints(report, trace)
     print(f"plot: {plot}" + (f"  video: {video}" if video else ""))
+
+
+def _print_waypoints(report: dict, trace) -> None:
+    """Each waypoint's arrival, or why the drive ended before it, and the end error."""
+    ended = (f"the robot fell at {trace.fell_s:.2f} s" if not trace.stayed_up else
+             f"the drive reached its time limit, {report['time_limit_s']:.1f} s")
+    for row in report["waypoints"]:
+        where = f"waypoint {row['index']} ({row['x']:g}, {row['y']:g})"
+        if row["reached_s"] is not None:
+            print(f"{where}: reached at {row['reached_s']:.2f} s, closest {row['closest_m']:.2f} m")
+        elif row["closest_m"] is not None:
+            print(f"{where}: NOT reached, closest {row['closest_m']:.2f} m: {ended}")
+        else:
+            print(f"{where}: NOT reached, never aimed at: {ended}")
+    done = "every waypoint reached" if report["reached_all"] else "NOT every waypoint reached"
+    print(f"{done}; ended {report['end_error_m']:.2f} m from the last waypoint, after {report['path'][-1][0]:.2f} s "
+          f"({report['path_length_m']:.2f} m of legs)")
 
 
 def _report(result, gaits: tuple[str, ...], *, source: str, plot: Path, video: Path | None) -> dict:
@@ -133,10 +162,11 @@ def _report(result, gaits: tuple[str, ...], *, source: str, plot: Path, video: P
         "longest_touch_s": trace.longest_touch_s,
         "velocity_error_rms": result.rms_error(),
         "path_length_m": result.path_length_m,
-        "end_commanded": result.commanded[-1, 1:3].tolist(),
+        "end_commanded": result.commanded[-1].tolist(),
         "end_reached": result.pose[-1, 1:3].tolist(),
         "end_error_m": result.end_error_m,
         "path": [[round(v, 4) for v in row] for row in result.pose.tolist()],
         "plot": str(plot),
         "video": None if video is None else str(video),
-    }
+    } | ({} if result.waypoints is None else result.waypoints.report())
+

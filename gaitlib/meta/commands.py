@@ -1,5 +1,5 @@
-"""What ``gaitlib drive`` is asked to do: a timeline of velocity commands (or waypoints made into one), and the
-library skill nearest each command.
+"""What ``gaitlib drive`` is asked to do: a timeline of velocity commands, and the library skill nearest each
+command; or waypoints, steered to closed loop (:mod:`gaitlib.meta.steering`).
 
 A command is a planar velocity in the trunk's heading frame: forward speed (m/s, negative backward), lateral speed
 (m/s, positive to the left) and yaw rate (rad/s, positive counter-clockwise), legged_gym's ``lin_vel_x``,
@@ -31,7 +31,7 @@ __all__ = [
     "MAX_INPUT_BYTES",
     "MAX_WAYPOINT_M",
     "RANGE_BOUND",
-    "STRAIGHT_ON",
+    "STRAIGHT",
     "TURN_RADIUS_M",
     "WAYPOINT_HEADER",
     "Commands",
@@ -41,7 +41,6 @@ __all__ = [
     "read_commands",
     "read_waypoints",
     "skills_of",
-    "waypoint_commands",
 ]
 
 COMMAND_HEADER = ("time_s", "forward", "lateral", "yaw_rate")
@@ -60,10 +59,6 @@ none of them)."""
 STRAIGHT = 0.05
 """A skill's lateral speed (m/s) and yaw rate (rad/s) at most this count as none: it goes straight (or turns in
 place, for forward and lateral speeds), as the quality bar's tolerance for a zero reference."""
-STRAIGHT_ON = math.radians(1.0)
-"""A turn toward the next waypoint of at most this is not made, rad: the robot goes straight on to the point of its
-heading nearest the waypoint, which it passes at most sin(1 degree), 1.75%, of the leg's length aside, and the next
-leg starts from there (a turn in place of 1 degree at 1 rad/s lasts half a control step)."""
 MAX_WAYPOINT_M = 1000.0
 """The farthest a waypoint may lie from the first, where the robot starts, m."""
 MAX_INPUT_BYTES = 1 << 20
@@ -182,41 +177,6 @@ def read_waypoints(path: Path) -> np.ndarray:
     return points
 
 
-def waypoint_commands(points: np.ndarray, skills: Sequence[Skill]) -> Commands:
-    """The command timeline that drives from ``points[0]`` (facing +x) through each later point, open loop: at
-    each point turn in place toward the next with the fastest skill that turns in place that way (the other way
-    round if the library turns only the other way), then go straight to it with the slowest skill that goes straight
-    ahead. A turn of at most :data:`STRAIGHT_ON` is not made: the leg goes straight on to the point of the heading
-    nearest the next waypoint, and the next leg starts from where the plan is, so that the commanded path passes
-    every waypoint within sin(1 degree) of its leg's length and no skipped turn adds up. One line if the library has
-    no such skill."""
-    ahead = [s for s in skills if s.velocity[0] > STRAIGHT and max(abs(s.velocity[1]), abs(s.velocity[2])) <= STRAIGHT]
-    turners = [s for s in skills if abs(s.velocity[2]) > STRAIGHT and max(map(abs, s.velocity[:2])) <= STRAIGHT]
-    if not ahead:
-        raise GaitlibError("waypoints need a skill that goes straight ahead; the library holds none")
-    forward = min(ahead, key=lambda s: s.velocity[0]).velocity
-    times, velocities = [0.0], []
-    position, heading = np.asarray(points[0], dtype=float), 0.0  # where the plan is, and its heading
-    for k, end in enumerate(points[1:], start=1):
-        step = end - position
-        length = float(np.linalg.norm(step))
-        turn = math.remainder(math.atan2(step[1], step[0]) - heading, 2 * math.pi)
-        if abs(turn) > STRAIGHT_ON:
-            spin = _turner(turners, turn, point=k)
-            angle = turn if math.copysign(1.0, turn) == math.copysign(1.0, spin[2]) else turn - math.copysign(
-                2 * math.pi, turn)
-            times.append(times[-1] + angle / spin[2])
-            velocities.append(spin)
-            heading += angle
-        else:
-            length *= math.cos(turn)  # straight on, to the point of this heading nearest the waypoint
-        times.append(times[-1] + length / forward[0])
-        velocities.append(forward)
-        position = position + length * np.array([math.cos(heading), math.sin(heading)])
-    _check_length(times[-1], f"the waypoints take {times[-1]:.3g} s to drive")
-    return Commands(time_s=np.array(times), velocity=np.array(velocities, dtype=float))
-
-
 def _check_length(end_s: float, drive: str) -> None:
     """Refuse a drive ending at ``end_s`` (``drive`` says so, e.g. ``the drive ends at 700 s``) that is longer
     than :data:`~gaitlib.defaults.MAX_RUN_SECONDS` or holds no control step, before any work."""
@@ -224,14 +184,6 @@ def _check_length(end_s: float, drive: str) -> None:
         raise GaitlibError(f"{drive}, longer than the longest run, {MAX_RUN_SECONDS:g} s")
     if round(end_s / (1.0 / CONTROL_HZ)) < 1:  # the steps a drive runs (gaitlib.meta.episode.drive_episode)
         raise GaitlibError(f"{drive}, less than half a control step (1/{CONTROL_HZ:g} s): there is nothing to drive")
-
-
-def _turner(turners: list[Skill], turn: float, *, point: int) -> tuple[float, float, float]:
-    if not turners:
-        raise GaitlibError(f"the waypoints turn {math.degrees(turn):.3g} degrees at waypoint {point}; the library "
-                           "holds no skill that turns in place")
-    same_way = [s for s in turners if s.velocity[2] * turn > 0]
-    return max(same_way or turners, key=lambda s: abs(s.velocity[2])).velocity
 
 
 def _advance(pose: np.ndarray, forward: float, lateral: float, yaw_rate: float, seconds: float) -> np.ndarray:

@@ -1,5 +1,5 @@
-"""The figure ``gaitlib drive`` writes: the robot's path in the plane against the commanded path, and its velocity
-against the commands over time."""
+"""The figure ``gaitlib drive`` writes: the robot's path in the plane against the commanded path (or the waypoints
+and their reach circles), and its velocity against the commands (or the skills asked for) over time."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from gaitlib.atomic import save_figure
-from gaitlib.meta.drive import DriveResult, step_velocity
+from gaitlib.meta.drive import DriveResult, WaypointOutcome, step_velocity
+from gaitlib.meta.steering import REACH_M
 
 __all__ = ["plot_drive"]
 
@@ -17,10 +18,11 @@ _SMOOTH_S = 0.5
 
 
 def plot_drive(result: DriveResult, path: Path) -> Path:
-    """Write ``result`` as a PNG (atomically): on the left the plane, the commanded path dashed, the robot's path
-    solid, its switches (red dots), the guard's catches (orange), its start (green) and a fall (purple cross); on the
-    right the forward speed, lateral speed and yaw rate commanded (steps) and achieved (a moving mean), requests and
-    switches marked."""
+    """Write ``result`` as a PNG (atomically): on the left the plane, the commanded path dashed (for waypoints: the
+    legs between them, each waypoint numbered in its reach circle, green reached, red not), the robot's path solid,
+    its switches (red dots), the guard's catches (orange), its start (green) and a fall (purple cross); on the right
+    the forward speed, lateral speed and yaw rate commanded (steps; for waypoints those of the skills asked for) and
+    achieved (a moving mean), requests and switches marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,10 +32,15 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
     fig = plt.figure(figsize=(12, 6.5))
     grid = fig.add_gridspec(3, 2, width_ratios=[1.1, 1.0])
     plane = fig.add_subplot(grid[:, 0])
-    plane.plot(commanded[:, 1], commanded[:, 2], "--", color="gray", label="commanded")
+    waypoints = result.waypoints
+    plane.plot(commanded[:, 0], commanded[:, 1], "--", color="gray",
+               label="commanded" if waypoints is None else "waypoint legs")
     plane.plot(pose[:, 1], pose[:, 2], color="black", linewidth=1.2, label="robot")
     plane.plot(*pose[0, 1:3], "o", color="tab:green", label="start")
-    plane.plot(*commanded[-1, 1:3], "s", color="gray", fillstyle="none", label="commanded end")
+    if waypoints is None:
+        plane.plot(*commanded[-1], "s", color="gray", fillstyle="none", label="commanded end")
+    else:
+        _waypoints(plane, waypoints)
     steps = [event.step for event in trace.switches]
     if steps:
         plane.plot(pose[steps, 1], pose[steps, 2], "o", color="tab:red", markersize=5, label="switch")
@@ -66,14 +73,33 @@ def plot_drive(result: DriveResult, path: Path) -> Path:
     axes[-1].set_xlabel("time (s)")
     outcome = "stayed up" if trace.stayed_up else f"fell at {trace.fell_s:.2f} s"
     rms = result.rms_error()["distance"]
+    if waypoints is None:
+        end = f"ended {result.end_error_m:.2f} m from the commanded end of a {result.path_length_m:.2f} m path"
+    else:
+        reached = sum(t is not None for t in waypoints.reached_s)
+        end = (f"{reached} of {len(waypoints.reached_s)} waypoints reached (within {REACH_M:g} m), ended "
+               f"{result.end_error_m:.2f} m from the last")
     fig.suptitle(
         f"drive with {trace.strategy}: {len(trace.requests_s)} request(s) (green), {len(trace.switches)} switch(es) "
-        f"(red), {outcome} (falls: {trace.falls});\nended {result.end_error_m:.2f} m from the commanded end of a "
-        f"{result.path_length_m:.2f} m path" + ("" if rms is None else f"; velocity error {rms:.3f} m/s (rms)"),
+        f"(red), {outcome} (falls: {trace.falls});\n{end}" + ("" if rms is None else
+                                                              f"; velocity error {rms:.3f} m/s (rms)"),
         fontsize=10,
     )
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def _waypoints(plane, waypoints: WaypointOutcome) -> None:
+    """The later waypoints on ``plane``, each numbered as in its file inside its reach circle: green if reached, red
+    if not."""
+    from matplotlib.patches import Circle
+
+    for k, ((x, y), reached) in enumerate(zip(waypoints.world[1:].tolist(), waypoints.reached_s, strict=True)):
+        color = "tab:green" if reached is not None else "tab:red"
+        plane.add_patch(Circle((x, y), REACH_M, fill=False, color=color, linewidth=1.2))
+        plane.plot(x, y, "+", color=color, markersize=7)
+        plane.annotate(str(k + 2), (x, y), textcoords="offset points", xytext=(6, 6), fontsize=8, color=color)
+    plane.plot([], [], "o", color="tab:green", fillstyle="none", label=f"reach circle ({REACH_M:g} m)")
 
 
 def _smoothed(pose: np.ndarray) -> np.ndarray:

@@ -1,12 +1,13 @@
 """One robot, requested switches recorded step by step for the plots and the video: a sequence of gaits, each
-requested a hold after the switch before (``gaitlib run``), or a timeline of gaits requested at set times
-(``gaitlib drive``)."""
+requested a hold after the switch before (``gaitlib run``), or gaits asked for step by step by a pilot
+(``gaitlib drive``: a command timeline, or a closed loop to waypoints)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -20,9 +21,10 @@ from gaitlib.meta.controller import DEADLINE_S, MetaController, MetaStep, Switch
 from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.meta.setup import SwitchingSetup
 from gaitlib.meta.trials import SwitchTrials, TrialOutcome, TrialProtocol, TrialSchedule
+from gaitlib.rotations import yaw_of
 from gaitlib.sim import make_backend
 
-__all__ = ["RunTrace", "check_run_length", "drive_episode", "run_episode"]
+__all__ = ["Pilot", "RunTrace", "check_run_length", "drive_episode", "run_episode"]
 
 
 @dataclass
@@ -210,10 +212,22 @@ def run_episode(
         sim.close()
 
 
+class Pilot(Protocol):
+    """What steers a drive (:func:`drive_episode`): a command timeline, or a closed loop to waypoints."""
+
+    def start(self) -> str:
+        """The gait to start in."""
+
+    def steer(self, step: int, dt: float, pose: np.ndarray, running: str) -> str | None:
+        """The gait to run at control step ``step`` (``dt`` s each), given the trunk's pose before it (x m, y m,
+        heading rad, in the world) and the gait that runs; ``None`` ends the drive. Called once more after the last
+        step, with the end pose (its answer unused)."""
+
+
 def drive_episode(
     setup: SwitchingSetup,
     *,
-    timeline: Sequence[tuple[float, str]],
+    pilot: Pilot,
     end_s: float,
     strategy: str = DEFAULT_STRATEGY,
     deadline_s: float = DEADLINE_S,
@@ -223,45 +237,43 @@ def drive_episode(
     falls: Falls = DEFAULT_FALLS,
     guard: Guard | None = None,
 ) -> RunTrace:
-    """One robot driven by a timeline of (time s, gait) from 0 s: it starts in the first gait (reference state
-    initialization at a random phase, fresh Table 1 randomization); at each later time its gait is requested from
-    the meta-controller, which ``strategy`` switches as in :func:`run_episode` (a gait already requested, or
-    active, is not requested again; the active one cancels a request still waiting, and a caught robot's return).
-    The run ends at ``end_s``, or at a fall. No pushes. ``action_delay``, ``seed``, ``falls`` and ``guard``: as
-    :func:`run_episode`'s."""
-    times = [t for t, _ in timeline]
-    if not timeline or times[0] != 0 or any(b <= a for a, b in pairwise(times)) or not end_s > times[-1]:
-        raise GaitlibError("a drive's timeline starts at 0 s, its times increase, and it ends after the last one")
-    gaits = [setup.gait_index(g) for _, g in timeline]  # unknown names: one line each
+    """One robot driven by ``pilot``: it starts in the pilot's first gait (reference state initialization at a
+    random phase, fresh Table 1 randomization); at every control step the pilot is asked for its gait from the
+    trunk's pose, and a gait that differs from the one it asked for before is requested from the meta-controller,
+    which ``strategy`` switches as in :func:`run_episode` (the active gait asked for again cancels a request still
+    waiting, and a caught robot's return). The run ends when the pilot says so, at ``end_s``, or at a fall. No
+    pushes. ``action_delay``, ``seed``, ``falls`` and ``guard``: as :func:`run_episode`'s."""
     sim = make_backend(backend, num_worlds=1)
     try:
         cfg = EnvConfig(episode_seconds=end_s + 1.0, termination=TerminationConfig().counting(falls))
         env = setup.make_env(sim, cfg, seed=seed, action_delay=action_delay)
-        if round(end_s / env.dt) < 1:
+        steps = round(end_s / env.dt)
+        if steps < 1:
             raise GaitlibError(f"a drive of {end_s:g} s is shorter than half a control step ({env.dt:.4g} s): there "
                                "is nothing to drive")
         ctl = setup.controller(env, strategy, deadline_s=deadline_s, seed=seed, guard=guard)
+        wanted = setup.gait_index(pilot.start())
         env.reset_worlds(torch.zeros(1, dtype=torch.long, device=env.device),
-                         gait=torch.full((1,), gaits[0], dtype=torch.long, device=env.device))
-        trace = RunTrace(gaits=setup.gaits, source=setup.gaits[gaits[0]], dests=(), strategy=strategy,
+                         gait=torch.full((1,), wanted, dtype=torch.long, device=env.device))
+        trace = RunTrace(gaits=setup.gaits, source=setup.gaits[wanted], dests=(), strategy=strategy,
                          thresholds=(), dt=env.dt, push_n=0.0, falls=falls, guarded=guard is not None,
                          guard_margin=None if guard is None else guard.margin)
         trace.start_qpos = _qpos(env)
         rows: dict[str, list] = {name: [] for name in _ROWS}
-        due = [round(t / env.dt) for t in times]
         world = torch.zeros(1, dtype=torch.long, device=env.device)
-        wanted, k = gaits[0], 1
-        for step in range(round(end_s / env.dt)):
-            while k < len(due) and due[k] <= step:
-                if gaits[k] != wanted:
-                    wanted = gaits[k]
-                    ctl.request(world, wanted)  # what a caught robot returns to from now
-                    if wanted == int(env.gait[0]):
-                        ctl.cancel(world)  # already met
-                    else:
-                        trace.requests_s.append(step * env.dt)
-                        trace.dests += (setup.gaits[wanted],)
-                k += 1
+        for step in range(steps + 1):
+            name = pilot.steer(step, env.dt, _pose(env), setup.gaits[int(env.gait[0])])
+            if name is None or step == steps:
+                break
+            gait = setup.gait_index(name)
+            if gait != wanted:
+                wanted = gait
+                ctl.request(world, wanted)  # what a caught robot returns to from now
+                if wanted == int(env.gait[0]):
+                    ctl.cancel(world)  # already met
+                else:
+                    trace.requests_s.append(step * env.dt)
+                    trace.dests += (setup.gaits[wanted],)
             if not _take(trace, rows, ctl, ctl.step()):
                 break
         _fill(trace, rows, legs=sim.robot.num_feet, qpos_size=7 + sim.robot.num_joints)
@@ -337,6 +349,12 @@ def _record(rows: dict[str, list], env: ImitationEnv, result: MetaStep, *, time_
     rows["foot_contact"].append(s.foot_contact[0].cpu().numpy().astype(bool))
     rows["touch"].append(bool(result.touch[0]))
     rows["qpos"].append(_qpos(env))
+
+
+def _pose(env: ImitationEnv) -> np.ndarray:
+    """The single world's trunk pose now: x (m), y (m) and heading (rad), what a robot's state estimator gives."""
+    s = env.sim_state
+    return np.array([float(s.root_pos[0, 0]), float(s.root_pos[0, 1]), float(yaw_of(s.root_quat[0]))])
 
 
 def _qpos(env: ImitationEnv) -> np.ndarray:
