@@ -19,7 +19,6 @@ from conftest import copy_library, git
 
 from gaitlib.library import Library, library_status
 from gaitlib.library.layout import ordered_pairs, shipped_library_dir
-from gaitlib.strategies.routes import load_routes
 from gaitlib.training.recipe import Recipe
 
 REPO = Path(__file__).resolve().parents[1]
@@ -73,7 +72,7 @@ def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alon
     assert f"--pairs {','.join(ordered_pairs(gaits))} " in stale[0]
     assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
     mine = Library(fresh_copy / "runs" / "library")
-    assert mine.gaits() == gaits and len(gaits) == 7
+    assert mine.gaits() == gaits and len(gaits) == 13
     training = mine.entry("stand").metadata["training"]
     assert training["iterations"] == 1 and training["preset"]["name"] == "cpu" and training["preset"]["num_envs"] == 64
     assert mine.entry("stand").metadata["evaluation"]["seconds"] == 1.0
@@ -130,28 +129,52 @@ def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> N
 
 
 @pytest.mark.parametrize(("folder", "gaits"), [
-    ("library", ("bound", "pace", "pronk", "stand", "trot", "trot_in_place", "walk")),
+    ("library", ("bound", "pace", "pronk", "sidestep_left", "sidestep_right", "stand", "trot", "trot_back",
+                 "trot_in_place", "trot_left", "trot_right", "turn_left", "walk")),
     ("library-switch-start", ("bound", "pace", "pronk", "stand", "trot", "walk")),
     ("library-paper", ("pace", "stand", "trot")),
 ])
 def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
-    """The shipped library (six gaits and the recovery skill) and the two shipped before it (switch-start, the
-    paper's recipe): every gait's policy, every ordered pair covered by switching models fitted on these very
-    policies (identities and checksums agree), nothing to fix."""
+    """The shipped library (six gaits, the recovery skill and six steering skills) and the two shipped before it
+    (switch-start, the paper's recipe): every gait's policy, every ordered pair covered by switching models fitted on
+    these very policies (identities and checksums agree), nothing to fix."""
     status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
     assert status["problems"] == [] and sorted(status["gaits"]) == list(gaits)
     assert set(status["switching"]["pairs"]) == set(ordered_pairs(gaits))
     assert {v["state"] for v in status["switching"]["pairs"].values()} == {"covered"}
 
 
-def test_growing_the_library_by_the_recovery_skill_left_its_six_gaits_as_they_were() -> None:
-    """The six gaits are the policies the library's stored evidence measured before it grew (the benchmark records
-    every policy's identity), and the recovery skill is the one gait added."""
+def test_growing_the_library_left_its_entries_as_they_were() -> None:
+    """The six gaits are the policies the library's stored evidence measured before it grew by the recovery skill,
+    and the seven entries those the route measurement of the seven recorded before it grew by the steering skills
+    (every measurement records each policy's identity): each growth added its skills and changed no entry. The
+    steering skills are those of their staging folders, byte for byte."""
     grown = Library(REPO / "library")
-    stored = json.loads((REPO / "docs" / "results" / "library" / "bench-0n.json").read_text())
-    before = stored["result"]["library_identities"]
-    assert len(before) == 6 and {gait: grown.identities()[gait] for gait in before} == before
-    assert set(grown.gaits()) - set(before) == {"trot_in_place"}
+    results = REPO / "docs" / "results"
+    six = json.loads((results / "library" / "bench-0n.json").read_text())["result"]["library_identities"]
+    seven = json.loads((results / "recover" / "routes.json").read_text())["result"]["policies"]
+    assert len(six) == 6 and {gait: grown.identities()[gait] for gait in six} == six
+    assert set(seven) - set(six) == {"trot_in_place"} and {gait: grown.identities()[gait] for gait in seven} == seven
+    steering = set(grown.gaits()) - set(seven)
+    assert steering == {"sidestep_left", "sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"}
+    for gait in steering:
+        staged = REPO / ("library-mirror" if gait == "sidestep_left" else "library-steer") / gait
+        assert all((grown.root / gait / name).read_bytes() == (staged / name).read_bytes()
+                   for name in ("metadata.json", "policy.pt", "policy.onnx")), gait
+
+
+def test_the_grown_libraries_old_pairs_are_served_by_the_net_fitted_before_it_grew() -> None:
+    """The shipped transition-net is a composite of two fits (gaitlib fit --extend): the first serves the seven
+    entries' 42 pairs and was fitted on their policies (the identities its route measurement recorded), the second
+    the 114 pairs with a steering skill; the TMT and calibration hold the same pairs' entries."""
+    from gaitlib.transition_net import load_parts
+
+    lib = Library(REPO / "library")
+    seven = json.loads((REPO / "docs" / "results" / "recover" / "routes.json").read_text())["result"]["policies"]
+    old, new = load_parts(lib.net_path, identities=lib.identities(), sources=())
+    assert {f"{m}-{n}" for m, n in old.pairs} == set(ordered_pairs(tuple(seven)))
+    assert old.metadata["library_identities"] == seven
+    assert len(new.pairs) == 114 and not set(old.pairs) & set(new.pairs)
 
 
 @pytest.mark.parametrize(("folder", "skills", "problems"), [
@@ -182,38 +205,41 @@ def readme_recipe(readme: Path) -> Recipe:
 
 def test_the_shipped_library_is_the_recipe_and_the_table_its_readme_gives() -> None:
     """Every entry of the shipped library passes its schema and checksums, was trained with the robust recipe of its
-    README's commands (the recovery skill with its kicks of 1.5 m/s), and its stored evaluation is the README's table
-    row and the stored evidence of the quality bar; the walk, the bound and the pronk from the states of this
-    library's own trot, pace and stand; its switching models drive all 42 pairs of the seven entries as they are,
-    labelled the field's way, its route table is current and the one its stored evidence holds, and its survival
-    estimate is current."""
+    README's commands (the recovery skill with its kicks of 1.5 m/s; the mirrored sidestep_left made from the trained
+    sidestep_right), and its stored evaluation is the stored evidence of the quality bar (and, for the seven first
+    entries, the README's table row); the walk, the bound and the pronk from the states of this library's own trot,
+    pace and stand; its switching models drive all 156 pairs of the thirteen entries as they are, labelled the field's
+    way, and its survival estimate is current. It ships no route table (measured with the models before it grew)."""
     from gaitlib.strategies.survival import load_survival
 
     lib = Library(REPO / "library")
     status = library_status(lib)
-    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 7
-    assert status.problems == () and len(status.pairs) == 42 and set(status.pairs.values()) == {"covered"}
+    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 13
+    assert status.problems == () and len(status.pairs) == 156 and set(status.pairs.values()) == {"covered"}
     assert set(status.falls().values()) == {"trunk"}
     assert load_survival(lib, status.bundle.gaits).horizon_s > 0
-    routes = load_routes(lib, tuple(lib.gaits()))
+    assert not (lib.switching_dir / "routes.json").exists()
     results = REPO / "docs" / "results"
-    stored = json.loads((results / "recover" / "routes.json").read_text())["result"]
-    assert routes.measured_with["falls"] == "trunk"
-    assert stored == json.loads((lib.switching_dir / "routes.json").read_text())
     recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
     identities = lib.identities()
     assert recipe.push_kind == "kick" and recipe.falls == "trunk"
+    evidence = {"trot_in_place": "recover", "sidestep_left": "mirror",
+                **dict.fromkeys(("sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"), "steer")}
     for gait in lib.gaits():
         metadata = json.loads((lib.root / gait / "metadata.json").read_text())
-        skill = gait == "trot_in_place"  # the recovery skill: the recipe but for its larger kicks
-        assert Recipe.from_record(metadata["training"]["recipe"]) == (
-            dataclasses.replace(recipe, kick_max=1.5) if skill else recipe), gait
+        if gait == "sidestep_left":  # the mirror image of the trained sidestep_right
+            assert metadata["training"]["mirror"]["source_sha256"] == identities["sidestep_right"]
+        else:
+            skill = gait == "trot_in_place"  # the recovery skill: the recipe but for its larger kicks
+            assert Recipe.from_record(metadata["training"]["recipe"]) == (
+                dataclasses.replace(recipe, kick_max=1.5) if skill else recipe), gait
         evaluation = metadata["evaluation"]
         assert (evaluation["episodes"], evaluation["seconds"], evaluation["falls"]) == (256, 20.0, "trunk")
-        row = next(text for text in readme.splitlines() if text.startswith(f"| `{gait}` |")).split(" | ")
-        assert row[2] == f"{round(evaluation['fall_rate'] * 256)} of 256", (gait, row)
-        assert row[-1] == f"{evaluation['median_heading_change_deg']:.1f} deg |", (gait, row)
-        quality_bar = json.loads((results / ("recover" if skill else "library") / f"eval-{gait}.json").read_text())
+        if gait not in evidence or gait == "trot_in_place":  # the seven first entries: the README's table
+            row = next(text for text in readme.splitlines() if text.startswith(f"| `{gait}` |")).split(" | ")
+            assert row[2] == f"{round(evaluation['fall_rate'] * 256)} of 256", (gait, row)
+            assert row[-1] == f"{evaluation['median_heading_change_deg']:.1f} deg |", (gait, row)
+        quality_bar = json.loads((results / evidence.get(gait, "library") / f"eval-{gait}.json").read_text())
         shared = [k for k in evaluation if k in quality_bar["result"]]
         assert len(shared) >= 20 and all(quality_bar["result"][k] == evaluation[k] for k in shared), gait
         if gait in ("walk", "bound", "pronk"):  # from the states this library's first three hand over

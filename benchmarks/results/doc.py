@@ -34,6 +34,7 @@ from benchmarks.results.budget import budget_table, screen_table
 from benchmarks.results.entries import entries_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.fuzz import edits_table, flips_table
+from benchmarks.results.growth import growth_pairs, growth_stages
 from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
     ACCURACY,
@@ -79,7 +80,8 @@ PAGES = {
                 "net-accuracy"),
     "docs/ablation.md": ("robustness-gaits", "robust-library"),
     "docs/switching_results.md": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
-    "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen"),
+    "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages",
+                            "growth-pairs"),
     "docs/skills.md": ("skills-bar", "skills-shoves"),
     "docs/switching.md": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                           "guard-pairs-menagerie-recover"),
@@ -89,7 +91,7 @@ PAGES = {
                            "gpu-check-h100", "gpu-check-graph"),
     "README.md": ("readme-results", "runs-where"),
     "docs/failures.md": ("fuzz-flips", "fuzz-edits"),
-    "library/README.md": ("library-entries",),
+    "library/README.md": ("library-entries", "skills-bar"),
 }
 """Each results page by its path from the repository's root and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")
@@ -139,6 +141,8 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               **{f"budget-curve{tag}": budget_table(Path(evidence_dir).parent / "budget" / f"success-curve{tag}.json")
                  for tag in ("", "-50n")},
               "budget-screen": screen_table(Path(evidence_dir).parent / "budget" / "screen-steer-0n.json"),
+              "growth-stages": growth_stages(Path(evidence_dir).parent / "growth"),
+              "growth-pairs": growth_pairs(Path(evidence_dir).parent / "growth"),
               "skills-bar": skills_bar(Path(evidence_dir).parent),
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
