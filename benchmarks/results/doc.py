@@ -34,7 +34,7 @@ from benchmarks.results.budget import budget_table, screen_table
 from benchmarks.results.entries import entries_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.fuzz import edits_table, flips_table
-from benchmarks.results.growth import growth_pairs, growth_stages
+from benchmarks.results.growth import growth_pairs, growth_pooled, growth_stages
 from benchmarks.results.guard import PAIR_TABLES, guard_curve, guard_pairs, guard_pushes, guard_shoves, guard_summary
 from benchmarks.results.headline import (
     ACCURACY,
@@ -76,8 +76,8 @@ __all__ = [
 ]
 
 PAGES = {
-    "docs/results.md": ("quality-bar", "shove-curves", "switches", "guard-summary", "sweep", "strategies-menagerie",
-                "net-accuracy"),
+    "docs/results.md": ("quality-bar", "shove-curves", "switches", "guard-summary", "growth-pairs", "growth-pooled",
+                        "sweep", "strategies-menagerie", "net-accuracy"),
     "docs/ablation.md": ("robustness-gaits", "robust-library"),
     "docs/switching_results.md": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages",
@@ -143,6 +143,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "budget-screen": screen_table(Path(evidence_dir).parent / "budget" / "screen-steer-0n.json"),
               "growth-stages": growth_stages(Path(evidence_dir).parent / "growth"),
               "growth-pairs": growth_pairs(Path(evidence_dir).parent / "growth"),
+              "growth-pooled": growth_pooled(Path(evidence_dir).parent / "growth"),
               "skills-bar": skills_bar(Path(evidence_dir).parent),
               "skills-shoves": skills_shoves(Path(evidence_dir).parent),
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS

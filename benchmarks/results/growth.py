@@ -9,7 +9,7 @@ from pathlib import Path
 from benchmarks.results.evidence import ROOT, arrow, interval, not_yet, pct, read_evidence, shown
 from gaitlib.stats import wilson_interval
 
-__all__ = ["GROWTH", "GROWTH_GOAL_MIN", "growth_pairs", "growth_stages"]
+__all__ = ["BENCHES", "GROWTH", "GROWTH_GOAL_MIN", "POOLED", "growth_pairs", "growth_pooled", "growth_stages"]
 
 GROWTH = ROOT / "docs" / "results" / "growth"
 """The stored record of the growth and its benchmarks."""
@@ -52,18 +52,18 @@ BENCHES = ("bench-fitted-0n.json", "bench-screened-0n.json")
 
 def growth_pairs(folder: Path = GROWTH, *, worst: int = 8) -> str:
     """The new pairs on the grown library at 0 N: pooled success of each strategy benchmarked, by the pairs fitted
-    at the budget and the pairs that never fell in the screen (a benchmark each), and the pairs ``net-lookahead``
-    fails most."""
+    at the budget and the pairs that never fell in the screen (each group from its own benchmark: :data:`BENCHES`),
+    and the pairs ``net-lookahead`` fails most."""
     paths = [Path(folder) / name for name in BENCHES]
     stored = [read_evidence(path) for path in paths]
     record = read_evidence(Path(folder) / "growth.json")
     if record is None or any(evidence is None for evidence in stored):
         return not_yet(*(path for path, evidence in zip(paths, stored, strict=True) if evidence is None))
     fitted = set(record["result"]["screen"]["fitted_pairs"])
-    groups: dict[str, dict] = {}
-    for evidence in stored:
+    groups: dict[str, dict] = {}  # the fitted pairs from the first benchmark, the others from the second
+    for evidence, keep in zip(stored, (lambda p: p in fitted, lambda p: p not in fitted), strict=True):
         for group in evidence["result"]["groups"].values():
-            groups.setdefault(group["strategy"], {}).update(group["cells"])
+            groups.setdefault(group["strategy"], {}).update({p: c for p, c in group["cells"].items() if keep(p)})
     lines = ["| strategy | pairs fitted at the budget | pairs that never fell in the screen |", "|---|---|---|"]
     for name, cells in groups.items():
         row = []
@@ -85,4 +85,44 @@ def growth_pairs(folder: Path = GROWTH, *, worst: int = 8) -> str:
         f"Success, % [95% interval], at 0 N on benchmark seed {stored[0]['result']['settings']['seed']}, the "
         f"strategies of one benchmark on the same draws; below, the {worst} new pairs `net-lookahead` fails most. "
         f"Evidence: {trials}."
+    )])
+
+
+POOLED = (("bench-all-50n.json", "the paper's random pushes of up to 50 N", 0.95),
+          ("bench-menagerie-0n.json", "MuJoCo Menagerie's A1 at 0 N", 0.99))
+"""The grown library's every pair, pooled: the stored benchmark, what it measures, and the goal (a pooled share)."""
+
+
+def growth_pooled(folder: Path = GROWTH) -> str:
+    """``net-lookahead`` over every pair of the grown library under the paper's pushes and on another A1: pooled
+    success of the seven first entries' 42 pairs, the 114 new ones and all, against each goal."""
+    paths = [Path(folder) / name for name, _, _ in POOLED]
+    stored = [read_evidence(path) for path in paths]
+    record = read_evidence(Path(folder) / "growth.json")
+    if record is None or all(evidence is None for evidence in stored):
+        return not_yet(*paths)
+    counts = record["result"]["screen"]["counts"]
+    gaits = {gait for pair in counts for gait in pair.split("-")}
+    steering = {g for g in gaits if all(f"{g}-{other}" in counts for other in gaits - {g})}  # every pair of it new
+    lines = ["| where | the seven entries' 42 pairs | the 114 new pairs | all pairs | goal |", "|---|---|---|---|---|"]
+    cited = []
+    for (_, what, goal), path, evidence in zip(POOLED, paths, stored, strict=True):
+        if evidence is None:
+            lines.append(f"| {what} | not measured | | | {goal:.0%} pooled |")
+            continue
+        (group,) = (g for g in evidence["result"]["groups"].values() if g["strategy"] == "net-lookahead")
+        cells = group["cells"]
+        row = []
+        for chosen in ([p for p in cells if not set(p.split("-")) & steering],
+                       [p for p in cells if set(p.split("-")) & steering], list(cells)):
+            won, n = sum(cells[p]["successes"] for p in chosen), sum(cells[p]["samples"] for p in chosen)
+            row.append(f"{pct(won / n)} {interval(*wilson_interval(won, n))} ({n - won:,} falls of {n:,})")
+        won, n = sum(c["successes"] for c in cells.values()), sum(c["samples"] for c in cells.values())
+        verdict = "met" if won >= goal * n else f"missed by {pct(goal - won / n)} points"
+        lines.append(f"| {what} | " + " | ".join(row) + f" | {goal:.0%} pooled: {verdict} |")
+        cited.append(f"`{shown(path)}` (made {evidence['made']}): `{evidence['command']}`")
+    per_pair = sorted({e["result"]["settings"]["samples"] for e in stored if e is not None})
+    return "\n".join([*lines, "", (
+        f"Success, % [95% interval], of `net-lookahead`, {'-'.join(map(str, per_pair))} trials a pair on benchmark "
+        "seed 1, pooled. Evidence: " + "; ".join(cited) + "."
     )])
