@@ -9,7 +9,9 @@ reach radius, :data:`gaitlib.meta.steering.REACH_M`) and the end error, seed by 
 Seeds 0 to N - 1, each exactly ``gaitlib drive ... --seed k`` (one robot, its own randomization and strategy seed),
 run one after the other in each of ``--jobs`` processes (one torch thread each). The goal: the robot stays up on at
 least 99 of 100 seeds, and every waypoint is reached (closest approach within 0.25 m). The file holds the command
-line, the library, the strategy and the guard, per seed its outcome and its wall time, and the totals.
+line, the library and its switching models' checksum, the strategy and the guard; per seed its outcome (a fall,
+each waypoint's arrival and closest approach, the end error, the switches, those forced by the deadline and the
+longest wait, catches, touches) and its wall time; and the totals.
 """
 
 from __future__ import annotations
@@ -73,10 +75,22 @@ def main() -> None:
     else:
         summary["goal_met"] = len(up) >= 0.99 * len(rows)
     write_json(args.out, {"command": command_line(), "library": str(args.library or "library"),
+                          "switching_checksum": _switching_checksum(args.library),
                           "input": str(args.waypoints or args.commands), "strategy": args.strategy,
                           "guard": args.guard, "guard_why_off": why_off, "goal_m": GOAL_M, "summary": summary,
                           "runs": rows})
     print(f"{args.out}: {summary}")
+
+
+def _switching_checksum(library: Path | None) -> str | None:
+    """The checksum of the library's switching models and survival estimate (``switching/checksums.json``), which
+    names the models the drives ran with; ``None`` without one."""
+    import json
+
+    from gaitlib.library.layout import default_library_dir
+
+    path = (library or default_library_dir()) / "switching" / "checksums.json"
+    return json.loads(path.read_text()).get("checksum") if path.is_file() else None
 
 
 def _load(options: dict) -> None:
@@ -108,7 +122,9 @@ def _drive(seed: int) -> dict:
               else drive_waypoints(s["setup"], s["points"], **options))
     trace = result.trace
     row = {"seed": seed, "stayed_up": trace.stayed_up, "fell_s": trace.fell_s, "duration_s": float(result.pose[-1, 0]),
-           "switches": len(trace.switches), "catches": len(trace.catches), "touches": trace.touches,
+           "switches": len(trace.switches), "forced": sum(e.forced for e in trace.switches),
+           "wait_s_max": max((e.wait_s for e in trace.switches), default=0.0), "catches": len(trace.catches),
+           "touches": trace.touches,
            "end_error_m": result.end_error_m, "wall_s": time.perf_counter() - start,
            "guard_why_off": s["why_off"]}
     if result.waypoints is not None:

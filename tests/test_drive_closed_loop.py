@@ -200,7 +200,7 @@ def test_the_seeds_benchmark_records_each_seed(steering_library, tmp_path, monke
     drive_seeds.main()
     record = json.loads(out.read_text())
     assert record["strategy"] == "random" and record["guard"] is False and record["command"]  # this process's
-    assert record["guard_why_off"] == "unguarded (--no-guard)"
+    assert record["guard_why_off"] == "unguarded (--no-guard)" and record["switching_checksum"] is None  # no models
     assert [row["seed"] for row in record["runs"]] == [5, 6]
     for row in record["runs"]:
         assert row["within_goal_all"] == (row["closest_m"][0] <= drive_seeds.GOAL_M)
