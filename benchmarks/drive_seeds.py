@@ -1,10 +1,9 @@
 """One drive over many seeds: whether the robot stays up, and for waypoints whether each is reached (within the
 reach radius, :data:`gaitlib.meta.steering.REACH_M`) and the end error, seed by seed, into one JSON file.
 
-    python -m benchmarks.drive_seeds --library runs/LIB13 --waypoints examples/drive/slalom.csv --seeds 100 \\
-        --out runs/drive_seeds/slalom.json
-    python -m benchmarks.drive_seeds --library runs/LIB13 --commands examples/drive/figure.csv --seeds 100 \\
-        --strategy random --no-guard --out runs/drive_seeds/figure.json --jobs 2
+    python -m benchmarks.drive_seeds --waypoints examples/drive/slalom.csv --seeds 100 --out runs/slalom-seeds.json
+    python -m benchmarks.drive_seeds --commands examples/drive/figure.csv --seeds 100 --strategy random --no-guard \\
+        --out runs/figure-seeds.json --jobs 2
 
 Seeds 0 to N - 1, each exactly ``gaitlib drive ... --seed k`` (one robot, its own randomization and strategy seed),
 run one after the other in each of ``--jobs`` processes (one torch thread each). The goal: the robot stays up on at

@@ -19,12 +19,13 @@ HEADER = "time_s,forward,lateral,yaw_rate\n"
 
 
 def _shipped_speeds() -> dict[str, float]:
-    """Each shipped gait's forward speed, read from its entry's metadata (none of them steers)."""
+    """The forward speed of each shipped gait that neither sidesteps nor turns, read from its entry's metadata (the
+    steering skills are farther than 0.2 m/s from the commands below)."""
     speeds = {}
     for path in sorted(SHIPPED.glob("*/metadata.json")):
         description = json.loads(path.read_text())["description"]
-        assert description.get("lateral_speed", 0.0) == 0.0 and description.get("yaw_rate", 0.0) == 0.0
-        speeds[path.parent.name] = description["forward_speed"]
+        if description.get("lateral_speed", 0.0) == 0.0 and description.get("yaw_rate", 0.0) == 0.0:
+            speeds[path.parent.name] = description["forward_speed"]
     return speeds
 
 
@@ -100,7 +101,7 @@ def test_the_commanded_path_integrates_lines_and_arcs() -> None:
         ("order.csv", HEADER + "0,1,0,0\n2,0,0,0\n2,0,0,0\n", "row 3 (2 s) does not come after row 2 (2 s)"),
         ("late.csv", HEADER + "0.5,1,0,0\n1,0,0,0\n", "the drive starts with it at 0 s"),
         ("one.csv", HEADER + "0,1,0,0\n", "at least two rows"),
-        ("aside.csv", HEADER + "0,0,0,0\n1,0,0.3,0\n2,0,0,0\n", "beyond every skill of the library: the nearest"),
+        ("aside.csv", HEADER + "0,0,0,0\n1,0,0.7,0\n2,0,0,0\n", "beyond every skill of the library: the nearest"),
     ],
 )
 def test_a_bad_command_timeline_is_one_line_before_any_work(tmp_path, name, text, says) -> None:
@@ -114,8 +115,7 @@ def test_a_bad_command_timeline_is_one_line_before_any_work(tmp_path, name, text
     ("text", "says"),
     [
         ("x,y\n1,2\n", "at least two points"),
-        ("x,y\n0,0\n0,1\n", "waypoints need a skill that turns, in place or going ahead, to aim at them again as "
-         "the robot drifts; the library holds none"),
+        ("x,y\n0,0\n0.1,0\n", "every waypoint lies within 0.2 m of the first, where the robot starts"),
         ("x,y\n0,0\n1,0\n1,0\n", "waypoint 3 is where waypoint 2 is"),
     ],
 )

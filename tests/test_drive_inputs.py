@@ -8,6 +8,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import threading
 import warnings
 from pathlib import Path
@@ -41,10 +42,13 @@ def _bending(count: int, degrees: float, spacing: float = 0.1) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------ waypoints
 def test_a_library_that_cannot_turn_refuses_waypoints_however_small_their_bends(tmp_path) -> None:
-    points = _bending(13, 0.9)  # the shipped library turns nowhere: a closed loop could not correct its heading
-    text = "x,y\n" + "".join(f"{x!r},{y!r}\n" for x, y in points.tolist())
+    library = tmp_path / "library"  # the stand and the pronk turn nowhere: a closed loop could not correct its heading
+    for gait in ("pronk", "stand"):
+        shutil.copytree(default_library_dir() / gait, library / gait)
+    text = "x,y\n" + "".join(f"{x!r},{y!r}\n" for x, y in _bending(13, 0.9).tolist())
     plot = tmp_path / "drive.png"
-    result = gaitlib_quick("drive", "--waypoints", str(_write(tmp_path / "w.csv", text)), "--plot", str(plot))
+    result = gaitlib_quick("drive", "--waypoints", str(_write(tmp_path / "w.csv", text)), "--plot", str(plot),
+                           "--library", str(library))
     _refused(result, "waypoints need a skill that turns, in place or going ahead, to aim at them again as the robot "
              "drifts; the library holds none")
     assert not plot.exists()
