@@ -80,8 +80,7 @@ PAGES = {
                         "sweep", "strategies-menagerie", "net-accuracy"),
     "docs/ablation.md": ("robustness-gaits", "robust-library"),
     "docs/switching_results.md": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
-    "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages",
-                            "growth-pairs"),
+    "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages"),
     "docs/skills.md": ("skills-bar", "skills-shoves"),
     "docs/switching.md": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
                           "guard-pairs-menagerie-recover"),
@@ -91,7 +90,7 @@ PAGES = {
                            "gpu-check-h100", "gpu-check-graph"),
     "README.md": ("readme-results", "runs-where"),
     "docs/failures.md": ("fuzz-flips", "fuzz-edits"),
-    "library/README.md": ("library-entries", "skills-bar"),
+    "library/README.md": ("library-entries",),
 }
 """Each results page by its path from the repository's root and its generated blocks, in the page's order."""
 GUARDS = ("best-f0", "recover")

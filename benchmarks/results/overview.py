@@ -99,8 +99,8 @@ def _guard_rows(folder: Path) -> list[str]:
             return f"{pct(point['falls'] / point['episodes'])}%"
 
         figures = " / ".join(f"{rate(r['unguarded_points'][0])} → {rate(r['points'][0])}" for r in points.values())
-        rows.append(f"| one 12 N s shove, {' / '.join(SHOVED)}, unguarded → guarded | - | {figures} falls | "
-                    f"[results]({RESULTS}#the-shipped-library-guarded) |")
+        rows.append(f"| one 12 N s shove, {' / '.join(SHOVED)}, unguarded → guarded by the seven entries' guard | - | "
+                    f"{figures} falls | [results]({RESULTS}#the-shipped-library-guarded) |")
     return rows
 
 
