@@ -1,5 +1,5 @@
 """One drive over many seeds: whether the robot stays up, and for waypoints whether each is reached (within the
-reach radius, :data:`gaitlib.meta.steering.REACH_M`) and the end error, seed by seed, into one JSON file.
+reach radius, :data:`gaitlib.meta.steering.REACH_M`) and the end error, seed by seed, into one evidence file.
 
     python -m benchmarks.drive_seeds --waypoints examples/drive/slalom.csv --seeds 100 --out runs/slalom-seeds.json
     python -m benchmarks.drive_seeds --commands examples/drive/figure.csv --seeds 100 --strategy random --no-guard \\
@@ -7,24 +7,31 @@ reach radius, :data:`gaitlib.meta.steering.REACH_M`) and the end error, seed by 
 
 Seeds 0 to N - 1, each exactly ``gaitlib drive ... --seed k`` (one robot, its own randomization and strategy seed),
 run one after the other in each of ``--jobs`` processes (one torch thread each). The goal: the robot stays up on at
-least 99 of 100 seeds, and every waypoint is reached (closest approach within 0.25 m). The file holds the command
-line, the library and its switching models' checksum, the strategy and the guard; per seed its outcome (a fall,
-each waypoint's arrival and closest approach, the end error, the switches, those forced by the deadline and the
-longest wait, catches, touches) and its wall time; and the totals.
+least 99 of 100 seeds, and every waypoint is reached (closest approach within 0.25 m). The file is evidence as the
+results pages read it (``python -m benchmarks.results``, the table ``drive-seeds`` of ``docs/driving.md``):
+``command``, this one with the arguments given; ``made``, the day; and ``result``: the library and its switching
+models' checksum, the strategy and the guard; per seed its outcome (a fall, each waypoint's arrival and closest
+approach, the end error, the switches, those forced by the deadline and the longest wait, catches, touches) and its
+wall time; and the totals.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import os
+import shlex
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from gaitlib.atomic import command_line, write_json
+from gaitlib.atomic import write_json
 
 GOAL_M = 0.25
 """A waypoint counts for the goal when the robot came within this of it, m."""
+STAY_UP = 0.99
+"""The goal's share of seeds on which the robot stays up."""
 
 _SETUP: dict = {}
 """This process's loaded library and options (one load per process)."""
@@ -69,16 +76,20 @@ def main() -> None:
             "reached_all": sum(r["reached_all"] for r in rows),
             "within_goal_all": sum(r["within_goal_all"] for r in rows),
             "end_error_m_max": max(r["end_error_m"] for r in rows),
-            "goal_met": len(up) >= 0.99 * len(rows) and all(r["within_goal_all"] for r in up),
+            "goal_met": len(up) >= STAY_UP * len(rows) and all(r["within_goal_all"] for r in up),
         }
     else:
-        summary["goal_met"] = len(up) >= 0.99 * len(rows)
-    write_json(args.out, {"command": command_line(), "library": str(args.library or "library"),
-                          "switching_checksum": _switching_checksum(args.library),
-                          "input": str(args.waypoints or args.commands), "strategy": args.strategy,
-                          "guard": args.guard, "guard_why_off": why_off, "goal_m": GOAL_M, "summary": summary,
-                          "runs": rows})
+        summary["goal_met"] = len(up) >= STAY_UP * len(rows)
+    result = {"library": str(args.library or "library"), "switching_checksum": _switching_checksum(args.library),
+              "input": str(args.waypoints or args.commands), "strategy": args.strategy, "guard": args.guard,
+              "guard_why_off": why_off, "goal_m": GOAL_M, "summary": summary, "runs": rows}
+    write_json(args.out, {"command": _command(), "made": datetime.date.today().isoformat(), "result": result})
     print(f"{args.out}: {summary}")
+
+
+def _command() -> str:
+    """This run's command line as the evidence names it: ``python -m benchmarks.drive_seeds`` and its arguments."""
+    return shlex.join(["python", "-m", "benchmarks.drive_seeds", *sys.argv[1:]])
 
 
 def _switching_checksum(library: Path | None) -> str | None:

@@ -187,6 +187,7 @@ def test_a_waypoint_drive_s_report_and_plot(steering_library, tmp_path) -> None:
 
 
 def test_the_seeds_benchmark_records_each_seed(steering_library, tmp_path, monkeypatch) -> None:
+    import datetime
     import sys
 
     from benchmarks import drive_seeds
@@ -198,8 +199,12 @@ def test_the_seeds_benchmark_records_each_seed(steering_library, tmp_path, monke
                                       str(waypoints), "--seeds", "2", "--first-seed", "5", "--strategy", "random",
                                       "--no-guard", "--out", str(out)])
     drive_seeds.main()
-    record = json.loads(out.read_text())
-    assert record["strategy"] == "random" and record["guard"] is False and record["command"]  # this process's
+    stored = json.loads(out.read_text())  # evidence, as the results pages read it (benchmarks/results/drive.py)
+    assert set(stored) == {"command", "made", "result"} and stored["made"] == datetime.date.today().isoformat()
+    assert stored["command"].startswith("python -m benchmarks.drive_seeds --library ")  # this process's arguments
+    assert stored["command"].endswith(f"--no-guard --out {out}")
+    record = stored["result"]
+    assert record["strategy"] == "random" and record["guard"] is False
     assert record["guard_why_off"] == "unguarded (--no-guard)" and record["switching_checksum"] is None  # no models
     assert [row["seed"] for row in record["runs"]] == [5, 6]
     for row in record["runs"]:

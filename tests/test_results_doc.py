@@ -158,6 +158,7 @@ def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     accuracy = _accuracy(tmp_path / "accuracy.json")
     (tmp_path / "earlier-lib" / "switching").mkdir(parents=True)
     earlier = _accuracy(tmp_path / "earlier-lib" / "switching" / "accuracy.json", latent=0.8, explicit=0.85)
+    _drive(tmp_path / "drive", "square-net-lookahead", [_drive_run(k) for k in range(100)])
     made = tables.render_tables(evidence, accuracy, earlier)
     assert list(made) == list(tables.TABLES)
     assert all(len(line) <= tables.WIDTH for body in made.values() for line in body.splitlines()
@@ -182,6 +183,9 @@ def test_the_tables_from_small_evidence(tmp_path: Path, evidence: Path) -> None:
     assert "latent >= explicit does not hold (80.0 against 85.0)" in earlier_net
     assert f"`gaitlib fit --library {tmp_path / 'earlier-lib'} --data data/a.h5 --data data/b.h5 --ablation" \
         in earlier_net
+    drives = made["drive-seeds"]  # the other eight drives not stored
+    assert "| `square.csv` | net-lookahead, guarded | 100 of 100 | 100 of 100 | 0.200 m | 0.190 m (0.190 m) |" in drives
+    assert "| `figure.csv` | random | not measured |" in drives and "met by all 1 drives" in drives
 
 
 def test_missing_evidence_says_not_yet_measured(tmp_path: Path, evidence: Path) -> None:
@@ -713,3 +717,98 @@ def test_the_guard_pairs_table_from_small_evidence(tmp_path: Path) -> None:
     assert lines[9] == ("- 0 N: 99.0% pooled guarded, within the goal of 99.0% (unguarded 99.7%); pairs guarded "
                         "below their unguarded interval: trot → pace; 0 catches.")
     assert lines[11].startswith("On MuJoCo Menagerie's A1, each cell 1,000 transitions at 0 N, seed 0 both ways")
+
+
+def _drive_run(seed: int, *, up: bool = True, closest: tuple | None = (0.19, 0.2), duration: float = 20.0,
+               switches: int = 6, end: float = 0.19, wall: float = 2.0) -> dict:
+    """One seed of ``benchmarks/drive_seeds.py`` (``closest``: each waypoint's closest approach, ``None`` for a
+    command timeline)."""
+    row = {"seed": seed, "stayed_up": up, "fell_s": None if up else 2.2, "duration_s": duration, "switches": switches,
+           "forced": 0, "wait_s_max": 0.0, "catches": 0, "touches": 0, "end_error_m": end, "wall_s": wall}
+    if closest is not None:
+        row |= {"reached_all": all(c is not None and c <= 0.2 for c in closest), "closest_m": list(closest),
+                "reached_s": [None if c is None or c > 0.2 else 5.0 for c in closest],
+                "within_goal_all": all(c is not None and c <= 0.25 for c in closest)}
+    return row
+
+
+def _drive(folder: Path, name: str, runs: list[dict], *, strategy: str = "net-lookahead", why_off: str | None = None,
+           wall: float = 200.0) -> Path:
+    """A stored drive over seeds, ``name`` the input's and the run's (``square-net-lookahead``)."""
+    folder.mkdir(exist_ok=True)
+    example = name.split("-")[0]
+    result = {"library": "library", "switching_checksum": None, "input": f"examples/drive/{example}.csv",
+              "strategy": strategy, "guard": why_off is None, "guard_why_off": why_off, "goal_m": 0.25,
+              "summary": {"seeds": len(runs), "stayed_up": sum(r["stayed_up"] for r in runs), "wall_s": wall},
+              "runs": runs}
+    return _store(folder, name, result, f"python -m benchmarks.drive_seeds --seeds {len(runs)} --out {name}.json")
+
+
+def test_the_drive_table_from_small_evidence(tmp_path: Path) -> None:
+    """Each stored drive a row in the table's order (a drive not stored says so), the end error for waypoints alone,
+    and the goal missed by a drive with too few seeds up or a waypoint beyond 0.25 m, by how much."""
+    from benchmarks.results.drive import drive_table
+
+    folder = tmp_path / "drive"
+    assert drive_table(folder).startswith("Not yet measured:")
+    _drive(folder, "square-net-lookahead", [_drive_run(k, end=0.18 if k < 60 else 0.21, switches=15 if k == 7 else 6,
+                                                       duration=20.0 if k % 2 else 30.0) for k in range(100)])
+    _drive(folder, "slalom-net-lookahead", [_drive_run(k, up=k > 1, closest=(0.19, 0.31 if k == 5 else 0.2 if k > 1
+                                                                             else None)) for k in range(100)])
+    _drive(folder, "figure-random", [_drive_run(k, closest=None, end=1.4, duration=19.0, switches=8, wall=1.5)
+                                     for k in range(100)], strategy="random", why_off="unguarded (--no-guard)",
+           wall=150.0)
+    lines = drive_table(folder).splitlines()
+    assert lines[0].startswith("| input | strategy, guard | stayed up | every waypoint within 0.25 m | closest")
+    assert lines[0].endswith("| end error, median (max) | drive, median (max) | switches, median (max) "
+                             "| wall per drive | 100 seeds |")
+    assert lines[2:11] == [
+        "| `square.csv` | net-lookahead, guarded | 100 of 100 | 100 of 100 | 0.200 m | 0.180 m (0.210 m) "
+        "| 25.0 s (30.0 s) | 6 (15) | 2.00 s | 3.3 min |",
+        "| `slalom.csv` | net-lookahead, guarded | 98 of 100 | 97 of 100 | 0.310 m; a waypoint never approached on 2 "
+        "seeds | 0.190 m (0.190 m) | 20.0 s (20.0 s) | 6 (6) | 2.00 s | 3.3 min |",
+        "| `figure.csv` | net-lookahead | not measured | | | | | | | |",
+        "| `square.csv` | net-lookahead-unguarded | not measured | | | | | | | |",
+        "| `slalom.csv` | net-lookahead-unguarded | not measured | | | | | | | |",
+        "| `figure.csv` | net-lookahead-unguarded | not measured | | | | | | | |",
+        "| `square.csv` | random | not measured | | | | | | | |",
+        "| `slalom.csv` | random | not measured | | | | | | | |",
+        "| `figure.csv` (commands) | random, unguarded | 100 of 100 | - | - | - | 19.0 s (19.0 s) | 8 (8) | 1.50 s "
+        "| 2.5 min |",
+    ]
+    text = _flat("\n".join(lines[12:]))
+    assert ("The goal, up on at least 99 of 100 seeds and every waypoint within 0.25 m on the seeds up: met by 2 of 3 "
+            "drives, missed by `slalom.csv` net-lookahead, guarded: up 98 of 100, 1 short of 99, and 1 of the seeds "
+            "up with a waypoint beyond 0.25 m, the farthest 0.310 m (0.060 m over). Not measured: "
+            "`figure-net-lookahead.json`,") in text
+    assert (f"Evidence: `{folder / 'square-net-lookahead.json'}` (made 2026-12-03): "
+            "`python -m benchmarks.drive_seeds --seeds 100 --out square-net-lookahead.json`;") in text
+    assert text.endswith("`python -m benchmarks.drive_seeds --seeds 100 --out figure-random.json`.")
+
+
+def test_a_stored_drive_edited_is_caught(tmp_path: Path) -> None:
+    """docs/driving.md's table is what the stored drives make: a copy of the page written from copies of them, one seed
+    edited (a waypoint beyond the goal), ``--check`` fails naming the table, and the rewrite shows the goal missed."""
+    shutil.copytree(ROOT / "docs" / "results" / "drive", tmp_path / "drive")
+    copy = tmp_path / "driving.md"
+    shutil.copy(ROOT / "docs" / "driving.md", copy)
+    library = tmp_path / "library"  # the evidence folder beside the drives (the other pages' tables: not read here)
+    assert tables.check_doc(copy, library) == "drive-seeds"  # the copies cite their own paths
+    assert tables.main(["--doc", str(copy), "--evidence", str(library)]) == 0
+    assert tables.check_doc(copy, library) is None
+    assert "| `square.csv` | random, unguarded | 100 of 100 | 100 of 100 | 0.200 m |" in copy.read_text()
+    path = tmp_path / "drive" / "square-random.json"
+    stored = json.loads(path.read_text())
+    run = stored["result"]["runs"][3]
+    run["closest_m"][1], run["within_goal_all"] = 0.31, False
+    path.write_text(json.dumps(stored))
+    assert tables.check_doc(copy, library) == "drive-seeds"
+    done = subprocess.run([sys.executable, "-m", "benchmarks.results", "--check", "--doc", str(copy), "--evidence",
+                           str(library)], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 1 and "'drive-seeds'" in done.stderr
+    assert tables.main(["--doc", str(copy), "--evidence", str(library)]) == 0
+    assert tables.check_doc(copy, library) is None
+    text = _flat(copy.read_text())
+    assert "| `square.csv` | random, unguarded | 100 of 100 | 99 of 100 | 0.310 m |" in text
+    assert ("met by 8 of 9 drives, missed by `square.csv` random, unguarded: 1 of the seeds up with a waypoint beyond "
+            "0.25 m, the farthest 0.310 m (0.060 m over).") in text

@@ -9,15 +9,15 @@ Each table sits between ``<!-- table: NAME -->`` and ``<!-- /table -->`` in the 
 the switch-success budget),
 ``docs/skills.md`` (the staged skills beyond the six gaits), ``docs/switching.md`` (the guard),
 ``docs/results_history.md`` (the guard before the library grew), ``docs/benchmarks.md`` (today's speeds and times)
-``README.md`` (the library beside the paper, what runs where), ``docs/failures.md`` (the fuzz runs' counts) and
-``library/README.md`` (how each shipped gait does).
+``README.md`` (the library beside the paper, what runs where), ``docs/failures.md`` (the fuzz runs' counts),
+``docs/driving.md`` (the example drives over seeds) and ``library/README.md`` (how each shipped gait does).
 Everything between the two markers is made here from the evidence and nothing else, so a figure edited by hand, or a
 stored result replaced without rewriting the page, makes ``--check`` fail (tests/test_results_doc.py runs it). The
 tables themselves are made in :mod:`benchmarks.results.headline`, :mod:`~benchmarks.results.robustness`,
 :mod:`~benchmarks.results.switches`, :mod:`~benchmarks.results.sweep`, :mod:`~benchmarks.results.skills`,
 :mod:`~benchmarks.results.guard`, :mod:`~benchmarks.results.timings`, :mod:`~benchmarks.results.speeds`,
-:mod:`~benchmarks.results.overview`, :mod:`~benchmarks.results.budget`, :mod:`~benchmarks.results.fuzz` and
-:mod:`~benchmarks.results.entries`; how
+:mod:`~benchmarks.results.overview`, :mod:`~benchmarks.results.budget`, :mod:`~benchmarks.results.fuzz`,
+:mod:`~benchmarks.results.drive` and :mod:`~benchmarks.results.entries`; how
 evidence is read and written is :mod:`benchmarks.results.evidence`.
 """
 
@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.budget import budget_table, screen_table
+from benchmarks.results.drive import drive_table
 from benchmarks.results.entries import entries_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
 from benchmarks.results.fuzz import edits_table, flips_table
@@ -90,6 +91,7 @@ PAGES = {
                            "gpu-check-h100", "gpu-check-graph"),
     "README.md": ("readme-results", "runs-where"),
     "docs/failures.md": ("fuzz-flips", "fuzz-edits"),
+    "docs/driving.md": ("drive-seeds",),
     "library/README.md": ("library-entries",),
 }
 """Each results page by its path from the repository's root and its generated blocks, in the page's order."""
@@ -159,6 +161,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               "backend-memory": memory_table(), "transition-writes": writes_table(), "entry-load": entry_load_table(),
               "readme-results": readme_results(evidence_dir, accuracy, Path(evidence_dir).parent / "guard"),
               "runs-where": runs_where(), "fuzz-flips": flips_table(), "fuzz-edits": edits_table(),
+              "drive-seeds": drive_table(Path(evidence_dir).parent / "drive"),
               "library-entries": entries_table(evidence_dir, Path(evidence_dir).parent / "recover")}
     return {name: _wrap(tables[name]) for name in TABLES}
 
