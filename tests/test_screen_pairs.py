@@ -35,8 +35,8 @@ def test_the_pairs_that_fell_are_those_with_a_failed_switch(switching_library):
 
 def test_a_screen_of_other_policies_holds_no_pair(switching_library):
     library = Library(switching_library)
-    foreign = {name: "0" * 64 for name in library.gaits()}
-    with pytest.raises(OptionError, match="fell:.*no sample .* current policies"):
+    foreign = dict.fromkeys(library.gaits(), "0" * 64)
+    with pytest.raises(OptionError, match=r"fell:.*no sample .* current policies"):
         parse_pairs(f"fell:{_screen(switching_library)}", library.gaits(), identities=foreign)
 
 
@@ -46,7 +46,7 @@ def test_a_screen_is_refused_where_no_library_is_given_or_the_file_does_not_read
         parse_pairs(f"fell:{_screen(switching_library)}", library.gaits())
     junk = tmp_path / "junk.h5"
     junk.write_bytes(np.arange(64, dtype=np.uint8).tobytes())
-    with pytest.raises(OptionError, match="fell:.*junk.h5"):
+    with pytest.raises(OptionError, match=r"fell:.*junk\.h5"):
         parse_pairs(f"fell:{junk}", library.gaits(), identities=library.identities())
     with pytest.raises(OptionError, match="fell:"):
         parse_pairs(f"fell:{tmp_path / 'missing.h5'}", library.gaits(), identities=library.identities())
