@@ -63,6 +63,14 @@ def shipped_copy(tmp_path_factory) -> Library:
     return copy_library(Library(), tmp_path_factory.mktemp("shipped") / "library")
 
 
+@pytest.fixture(scope="module")
+def routed_copy(tmp_path_factory) -> Library:
+    """A copy of a committed library with a route table: the switch-start library's (the shipped one holds none
+    since it grew)."""
+    return copy_library(Library(Library().root.parent / "library-switch-start"),
+                        tmp_path_factory.mktemp("routed") / "library")
+
+
 ROUTE_EDITS = {
     "a success count above its total": (lambda t: t["rates"].update({"trot-stand": [1001, 1000]}),
                                         "rates.trot-stand counts 1001 successes of 1000 transitions"),
@@ -77,13 +85,13 @@ ROUTE_EDITS = {
 
 
 @pytest.mark.parametrize("edit", list(ROUTE_EDITS), ids=list(ROUTE_EDITS))
-def test_an_impossible_route_table_is_refused_naming_the_field(shipped_copy, edit) -> None:
-    path = shipped_copy.switching_dir / ROUTES_FILE
+def test_an_impossible_route_table_is_refused_naming_the_field(routed_copy, edit) -> None:
+    path = routed_copy.switching_dir / ROUTES_FILE
     change, message = ROUTE_EDITS[edit]
     with edited(path, change):
-        refused(lambda: load_routes(Library(shipped_copy.root), shipped_copy.gaits()), GaitlibError,
+        refused(lambda: load_routes(Library(routed_copy.root), routed_copy.gaits()), GaitlibError,
                 f"{path} is damaged: ", message)
-    assert load_routes(Library(shipped_copy.root), shipped_copy.gaits())  # the pristine table still loads
+    assert load_routes(Library(routed_copy.root), routed_copy.gaits())  # the pristine table still loads
 
 
 @pytest.fixture(scope="module")
