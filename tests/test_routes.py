@@ -71,17 +71,23 @@ def test_the_routes_command_writes_a_table_that_a_refit_or_other_policies_make_s
         load_routes(library, ("stand", "trot"))
 
 
-def test_run_routed_follows_the_shipped_route_table(tmp_path) -> None:
-    shipped = Library()
-    route = json.loads((shipped.switching_dir / ROUTES_FILE).read_text())["detours"]["trot-pace"]
+def test_run_routed_follows_a_committed_route_table(tmp_path) -> None:
+    """``gaitlib run --routed`` on the switch-start library takes its trot to the pace through the gait its route
+    table names; the shipped library, which holds no route table since it grew, refuses --routed in one line."""
+    committed = Library(Library().root.parent / "library-switch-start")
+    route = json.loads((committed.switching_dir / ROUTES_FILE).read_text())["detours"]["trot-pace"]
     assert route[0] == "trot" and route[-1] == "pace" and len(route) == 3  # the trot goes to the pace through a gait
     ran = gaitlib_quick("run", "--from", "trot", "--to", "pace", "--routed", "--request-at", "0.3", "--hold", "0.7",
-                  "--plot", str(tmp_path / "run.png"), "--backend", "mujoco", "--json")
+                        "--library", str(committed.root), "--plot", str(tmp_path / "run.png"), "--backend", "mujoco",
+                        "--json")
     assert ran.returncode == 0, ran.stderr
     report = json.loads(ran.stdout)
     assert report["asked"] == ["pace"] and report["to"] == route[1:]
     legs = list(itertools.pairwise(route))
     assert [(s["from"], s["to"]) for s in report["switches"]] in (legs, legs[:1])  # a fall ends the run
+    refused = gaitlib_quick("run", "--from", "trot", "--to", "pace", "--routed", "--plot", str(tmp_path / "no.png"))
+    assert refused.returncode == 2 and "has no route table" in refused.stderr and refused.stderr.count("\n") == 1
+    assert not (tmp_path / "no.png").exists()
 
 
 class _Legs(CellSchedule):
