@@ -84,7 +84,7 @@ PAGES = {
     "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages"),
     "docs/skills.md": ("skills-bar", "skills-shoves"),
     "docs/switching.md": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
-                          "guard-pairs-menagerie-recover"),
+                          "guard-pairs-menagerie-recover", "guard-shoves-grown"),
     "docs/results_history.md": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
     "docs/benchmarks.md": ("sim-throughput", "recipe-speed", "collect-throughput", "backend-memory", "guard-cost",
                            "transition-writes", "command-start", "command-start-policy", "suite-latest", "entry-load",
@@ -150,6 +150,7 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
               **{f"guard-{kind}-{tag}": table(tag, Path(evidence_dir).parent / "guard") for tag in GUARDS
                  for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))},
               "guard-curve-recover": guard_curve("recover", Path(evidence_dir).parent / "guard"),
+              "guard-shoves-grown": guard_shoves("grown", Path(evidence_dir).parent / "guard"),
               "guard-summary": guard_summary("recover", Path(evidence_dir).parent / "guard"),
               **{f"guard-pairs-{'' if robot == 'sim' else robot + '-'}recover":
                  guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES},
