@@ -9,6 +9,7 @@ import subprocess
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "first_fit",
     "gait_order",
     "is_shipped",
+    "merged_fit",
     "ordered_pairs",
     "protection",
     "shipped_library_dir",
@@ -116,3 +118,20 @@ def check_identities(recorded: Mapping[str, str], current: Mapping[str, str], *,
                 f"{what} was made for another '{gait}' policy than the library's (identities differ); gaitlib "
                 "library lists the stale pairs and the commands that collect and fit them again"
             )
+
+
+def merged_fit(kept_falls: str, new_falls: str, kept: Mapping[str, str], new: Mapping[str, str], *,
+               what: str) -> tuple[Falls, dict[str, str]]:
+    """The definition of a fall and the identities (gait name -> identity) of two fits' models of one kind merged
+    into one (``gaitlib fit --extend``): ``kept_falls``/``new_falls`` each fit's definition, ``kept``/``new`` its
+    identities. Refused in one line naming ``what`` (e.g. ``"TMT"``) where the definitions differ or a gait's
+    policies do (:class:`~gaitlib.errors.TransitionDataError`)."""
+    falls = {Falls(kept_falls), Falls(new_falls)}
+    if len(falls) != 1:
+        raise TransitionDataError(f"the kept {what} and the new one follow different definitions of a fall "
+                                  f"({', '.join(sorted(falls))}); they cannot be merged")
+    identities = dict(kept)
+    for gait, identity in new.items():
+        if identities.setdefault(gait, identity) != identity:
+            raise TransitionDataError(f"the kept {what} and the new one hold different '{gait}' policies")
+    return falls.pop(), identities

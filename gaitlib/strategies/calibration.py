@@ -24,7 +24,7 @@ import torch
 from gaitlib.atomic import read_json, write_json
 from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
-from gaitlib.library.layout import check_identities
+from gaitlib.library.layout import check_identities, merged_fit
 from gaitlib.transition_net import TransitionNet, batch_features
 from gaitlib.transitions import TransitionData
 
@@ -134,14 +134,8 @@ def merge_calibrations(kept: Calibration, new: Calibration, *, new_pairs: Collec
     does, its (a, b) copied. ``parts`` is what the info records of each part (the pairs it serves, how it was fitted);
     the definition of a fall stays at the info's top level. Calibrations of different definitions of a fall, or of
     another policy of one gait, are refused in one line."""
-    falls = {Falls(c.info.get("falls", Falls.CONTACT)) for c in (kept, new)}
-    if len(falls) != 1:
-        raise TransitionDataError(f"the kept net calibration and the new one follow different definitions of a fall "
-                                  f"({', '.join(sorted(falls))}); they cannot be merged")
-    identities = dict(kept.identities)
-    for gait, identity in new.identities.items():
-        if identities.setdefault(gait, identity) != identity:
-            raise TransitionDataError(f"the kept net calibration and the new one hold different '{gait}' policies")
+    falls, identities = merged_fit(kept.info.get("falls", Falls.CONTACT), new.info.get("falls", Falls.CONTACT),
+                                   kept.identities, new.identities, what="net calibration")
     index = {name: i for i, name in enumerate(gaits)}
     pairs = {}
     for calibration in (kept, new):
@@ -149,7 +143,7 @@ def merge_calibrations(kept: Calibration, new: Calibration, *, new_pairs: Collec
             names = (calibration.gaits[m], calibration.gaits[n])
             if (names in new_pairs) == (calibration is new) and set(names) <= set(index):
                 pairs[(index[names[0]], index[names[1]])] = ab
-    info = {"falls": falls.pop(), "rule": new.info["rule"], "parts": list(parts)}
+    info = {"falls": falls, "rule": new.info["rule"], "parts": list(parts)}
     return Calibration(tuple(gaits), {g: identities[g] for g in gaits}, dict(sorted(pairs.items())), info)
 
 

@@ -25,7 +25,7 @@ import torch
 from gaitlib.atomic import read_json, write_json
 from gaitlib.defaults import Falls
 from gaitlib.errors import TransitionDataError
-from gaitlib.library.layout import check_identities
+from gaitlib.library.layout import check_identities, merged_fit
 from gaitlib.strategies.base import PHASE_GRID, Strategy, SwitchQuery
 from gaitlib.transitions.schema import TransitionData
 
@@ -167,14 +167,8 @@ def merge_tables(kept: TransitionTable, new: TransitionTable, *, new_pairs: Coll
     if kept.bins != new.bins:
         raise TransitionDataError(f"the kept TMT has {kept.bins} phase bins a cycle and the new one {new.bins}; they "
                                   "cannot be merged")
-    falls = {Falls(t.info.get("falls", Falls.CONTACT)) for t in (kept, new)}
-    if len(falls) != 1:
-        raise TransitionDataError(f"the kept TMT and the new one follow different definitions of a fall "
-                                  f"({', '.join(sorted(falls))}); they cannot be merged")
-    identities = dict(kept.identities)
-    for gait, identity in new.identities.items():
-        if identities.setdefault(gait, identity) != identity:
-            raise TransitionDataError(f"the kept TMT and the new one hold different '{gait}' policies")
+    falls, identities = merged_fit(kept.info.get("falls", Falls.CONTACT), new.info.get("falls", Falls.CONTACT),
+                                   kept.identities, new.identities, what="TMT")
     index, g = {name: i for i, name in enumerate(gaits)}, len(gaits)
     valued = [kept if name in kept.gaits else new for name in gaits]  # the table each typical value comes from
     merged = TransitionTable(
@@ -184,7 +178,7 @@ def merge_tables(kept: TransitionTable, new: TransitionTable, *, new_pairs: Coll
         counts=np.zeros((g, g, kept.bins, kept.bins), dtype=np.int64),
         typical_value=np.array([t.typical_value[t.gaits.index(name)] for t, name in zip(valued, gaits, strict=True)]),
         thresholds={name: {} for name in CALIBRATED},
-        info={"falls": falls.pop(), "bins": kept.bins, "score": new.info["score"],
+        info={"falls": falls, "bins": kept.bins, "score": new.info["score"],
               "calibration": new.info["calibration"], "parts": list(parts),
               "created": datetime.now(UTC).isoformat(timespec="seconds")},
     )
