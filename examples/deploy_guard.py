@@ -3,7 +3,8 @@
 Each control step, give it the running gait, the actor observation its ``policy.onnx`` reads, the reference phase,
 the time since the robot started, s, and the trunk's acceleration in its own frame with gravity taken away (x
 forward, y left, z up; m/s^2, over the last control step: what the IMU reads); it answers whether to switch now, to
-which gait and destination phase.
+which gait and destination phase. After a catch into a catch skill (``holds_until_calm``), hold it beyond horizon_s
+until ``calm`` says so, at most the spec's calm wait_s after the catch.
 """
 
 import json
@@ -72,3 +73,15 @@ class RobotGuard:
         if beats or stay < self.spec["floor"]:
             return dest, offers[dest][1]
         return None
+
+    def holds_until_calm(self, gait):
+        """A catch into this gait (a catch skill) is held beyond horizon_s until calm, at most calm["wait_s"], s."""
+        return gait in self.spec["catchers"]
+
+    def calm(self, gravity, velocity, rates):
+        """The trunk is calm: gravity, the unit gravity direction in the trunk frame (the observation's projected
+        gravity); velocity, the trunk's horizontal velocity (world or heading frame) from the state estimator, m/s;
+        rates, the gyro's angular rates, rad/s."""
+        c = self.spec["calm"]
+        return bool(np.linalg.norm(gravity[:2]) < np.sin(np.deg2rad(c["tilt_deg"]))
+                    and np.linalg.norm(velocity[:2]) < c["speed_m_s"] and np.linalg.norm(rates) < c["rate_rad_s"])

@@ -1,8 +1,10 @@
 """The guard in deployable form: examples/deploy_guard.py, from the folder gaitlib survival export writes, reads
-what gaitlib's guard reads and decides what it decides; an estimate that needs the critic is refused."""
+what gaitlib's guard reads and decides what it decides, and reads a trunk calm where gaitlib does (the hold after a
+catch into a catch skill); an estimate that needs the critic is refused."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
 import re
@@ -14,10 +16,13 @@ import pytest
 import torch
 
 from gaitlib.envs import EnvConfig
+from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, is_calm
 from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
+from gaitlib.meta.controller import CALM_WAIT_S
+from gaitlib.rotations import quat_multiply, quat_rotate_inverse
 from gaitlib.sim import make_backend
 from gaitlib.strategies.base import SwitchQuery
 from gaitlib.strategies.guard_export import export_guard
@@ -63,6 +68,14 @@ def _estimate(setup, inputs: tuple[str, ...], margin: float) -> SurvivalEstimate
                             platt, net.eval())
 
 
+def _robot_guard(folder: Path):
+    """examples/deploy_guard.py's RobotGuard on ``folder``."""
+    spec = importlib.util.spec_from_file_location("deploy_guard", EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.RobotGuard(folder)
+
+
 def test_the_doc_shows_the_example_verbatim() -> None:
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "deploying.md").read_text(), flags=re.DOTALL)
     assert EXAMPLE.read_text() in blocks
@@ -84,11 +97,9 @@ def test_the_robot_loop_reads_and_decides_as_the_guard(switching_library, tmp_pa
     run = subprocess.run([sys.executable, "-m", "gaitlib.cli", "survival", "export", "--out", str(tmp_path / "guard"),
                           "--library", str(library.root)], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    spec = importlib.util.spec_from_file_location("deploy_guard", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    robot = module.RobotGuard(tmp_path / "guard")
+    robot = _robot_guard(tmp_path / "guard")
     assert robot.spec["catch_into"] == table and robot.spec["armed_from_s"] == 2 / 30 and robot.spec["floor"] == 0.3
+    assert robot.spec["catchers"] == [] and not robot.holds_until_calm("stand")  # the tiny library has no catch skill
     guard = Guard(estimate, get_strategy("net-lookahead", setup.resources))
     sim = make_backend("mujoco", num_worlds=3)
     try:
@@ -144,3 +155,58 @@ def test_an_estimate_reading_the_critic_is_refused(switching_library, tmp_path):
                      estimate=_estimate(setup, ("latent", "phase", "value"), margin=0.1), net=setup.resources.net,
                      calibration=setup.resources.calibration)
     assert not (tmp_path / "guard").exists()
+
+
+def _turned(state, **changes):
+    """``state`` (a :class:`~gaitlib.sim.SimState`) with its trunk's quaternion, velocity or rates changed."""
+    return dataclasses.replace(state, **{k: v.clone() for k, v in changes.items()})
+
+
+def test_the_robot_holds_a_catch_skill_until_calm_as_gaitlib_does(switching_library, tmp_path):
+    setup = load_switching(switching_library)
+    models = {"policies": [e.policy for e in setup.entries], "estimate": _estimate(setup, ("latent", "phase"), 0.1),
+              "net": setup.resources.net, "calibration": setup.resources.calibration}
+    with pytest.raises(GaitlibError, match="gallop"):
+        export_guard(tmp_path / "guard", **models, catchers=("gallop",))
+    assert not (tmp_path / "guard").exists()
+    robot = _robot_guard(export_guard(tmp_path / "guard", **models, catchers=("stand",)).parent)
+    assert robot.spec["catchers"] == ["stand"] and robot.holds_until_calm("stand")
+    assert not robot.holds_until_calm("trot")
+    assert robot.spec["calm"] == {"tilt_deg": CALM_TILT_DEG, "speed_m_s": CALM_SPEED_M_S,
+                                  "rate_rad_s": CALM_RATE_RAD_S, "wait_s": CALM_WAIT_S}
+    sim = make_backend("mujoco", num_worlds=2)
+    try:
+        env = setup.make_env(sim, EnvConfig(episode_seconds=30.0), seed=0)
+        stand = setup.gait_index("stand")
+        env.reset_worlds(torch.arange(2), gait=torch.full((2,), stand))
+        policy = setup.entries[stand].policy
+        with torch.inference_mode():
+            for _ in range(15):
+                env.step(policy.act(env.get_observations()))
+            env.shove(torch.tensor([1]), torch.tensor([[0.0, 300.0, 0.0]]), 3)  # 30 N s sideways: world 1 is shoved
+            for _ in range(3):
+                env.step(policy.act(env.get_observations()))
+        real = env.sim_state
+    finally:
+        sim.close()
+
+    def rolled(deg: float) -> torch.Tensor:  # the trunk rolled by deg about the world's x axis
+        half = math.radians(deg) / 2
+        return quat_multiply(torch.tensor([[math.cos(half), math.sin(half), 0.0, 0.0]]).expand(2, 4), real.root_quat)
+
+    fast, turning = real.root_lin_vel.clone(), real.root_ang_vel.clone()
+    fast[:, 0] += 1.0
+    turning[:, 2] += 1.5
+    states = {"as simulated": (real, [True, False]), "rolled 5 deg": (_turned(real, root_quat=rolled(5.0)), None),
+              "rolled 20 deg": (_turned(real, root_quat=rolled(20.0)), [False, False]),
+              "1 m/s faster": (_turned(real, root_lin_vel=fast), [False, False]),
+              "turning 1.5 rad/s faster": (_turned(real, root_ang_vel=turning), [False, False])}
+    down = torch.tensor([[0.0, 0.0, -1.0]]).expand(2, 3)
+    for name, (state, expected) in states.items():
+        gravity = quat_rotate_inverse(state.root_quat, down).numpy()  # the observation's projected gravity
+        robot_reads = [robot.calm(gravity[w], state.root_lin_vel[w, :2].numpy(), state.root_ang_vel[w].numpy())
+                       for w in range(2)]
+        assert robot_reads == is_calm(state).tolist(), name
+        if expected is not None:
+            assert robot_reads == expected, name
+    assert is_calm(states["rolled 5 deg"][0])[0]  # a small lean is still calm

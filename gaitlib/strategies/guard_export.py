@@ -18,7 +18,11 @@ Written into one folder:
   gait -> sector of ``sectors`` the trunk's acceleration points to -> the gait it is caught into; a gait or sector
   it lacks is never caught; null: the gait offered most) and Platt (a, b) per gait
   (``sigmoid(a * logit + b)``), the net's calibration per ordered pair (``sigmoid(a * logit(clip(sigmoid(z),
-  1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, and the rule.
+  1e-6, 1 - 1e-6)) + b)``), the candidate destination phases, the catch skills (``catchers``: the gaits whose task
+  is catch; a catch into one is held until the trunk is calm), when a trunk is calm (``calm``: ``tilt_deg``, deg
+  from upright, ``speed_m_s``, horizontal, m/s, ``rate_rad_s``, angular rate norm, rad/s, each a bound it stays
+  below, and ``wait_s``, the longest wait for it after the catch, s; :func:`gaitlib.envs.catch.is_calm`), and the
+  rule.
 
 An estimate that reads the critic's value is refused in one line: the critic sees privileged simulator quantities a
 robot does not have. The explicit state is refused too (export it as a latent-phase estimate: ``--inputs``).
@@ -34,6 +38,7 @@ from pathlib import Path
 import torch
 
 from gaitlib.atomic import atomic_path, write_json
+from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, CATCH_EPISODE_S
 from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS
 from gaitlib.strategies.base import phase_grid
@@ -46,8 +51,11 @@ __all__ = ["DEPLOYABLE_INPUTS", "export_guard"]
 
 DEPLOYABLE_INPUTS = (("latent", "phase"), ("latent", "phase", "imu"))
 """The survival inputs a robot-side loop computes from its own observations and IMU."""
-_FORMAT = {"format": "gaitlib.guard_export", "format_version": 4}
-"""2: armed_from_s, catch_into; 3: imu, sectors; 4: floor."""
+_FORMAT = {"format": "gaitlib.guard_export", "format_version": 5}
+"""2: armed_from_s, catch_into; 3: imu, sectors; 4: floor; 5: catchers, calm."""
+_CALM_WAIT_S = CATCH_EPISODE_S
+"""The meta-controller's ``CALM_WAIT_S``, s (a layer above this one: the catch skill's episode, as there;
+``tests/test_guard_export.py`` checks that they agree)."""
 
 
 class _Latent(torch.nn.Module):
@@ -97,10 +105,12 @@ def _export(module: torch.nn.Module, width: int, path: Path, *, inputs: str, out
 
 
 def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, net: TransitionNet | ComposedNet,
-                 calibration: Calibration) -> Path:
+                 calibration: Calibration, catchers: tuple[str, ...] = ()) -> Path:
     """Write the guard's deployable files into ``folder`` (module doc) for ``policies`` (one
     :class:`~gaitlib.library.policy.GaitPolicy` per gait, in the estimate's order); returns the path of
-    ``guard.json``. An estimate that is not finite is refused in one line before anything is written."""
+    ``guard.json``. ``catchers``: the gaits that are catch skills (their task is catch), held after a catch until
+    the trunk is calm. An estimate that is not finite, or a catcher that is not one of its gaits, is refused in one
+    line before anything is written."""
     check_finite(estimate)
     if tuple(estimate.inputs) not in DEPLOYABLE_INPUTS:
         raise GaitlibError(f"the survival estimate reads {', '.join(estimate.inputs)}; a robot computes only "
@@ -108,6 +118,10 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
                            "it with gaitlib survival fit --inputs latent,phase,imu")
     if net.spec.kind != "latent":
         raise GaitlibError(f"the transition-net reads '{net.spec.kind}' inputs; the exported guard needs a latent net")
+    unknown = [g for g in catchers if g not in estimate.gaits]
+    if unknown:
+        raise GaitlibError(f"catchers {', '.join(unknown)} are not gaits of the survival estimate "
+                           f"({', '.join(estimate.gaits)})")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     gaits = estimate.gaits
@@ -141,10 +155,16 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "survival_platt": {gaits[k]: list(ab) for k, ab in estimate.platt.items()},
         "net_calibration": {f"{gaits[m]}-{gaits[n]}": list(ab) for (m, n), ab in calibration.pairs.items()},
         "candidates": phase_grid().tolist(),
+        "catchers": [g for g in gaits if g in catchers],
+        "calm": {"tilt_deg": CALM_TILT_DEG, "speed_m_s": CALM_SPEED_M_S, "rate_rad_s": CALM_RATE_RAD_S,
+                 "wait_s": _CALM_WAIT_S},
         "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
                 "catch_into table's gait for the running gait and the sector the trunk's acceleration points to, "
                 "where there is a table) beats the calibrated survival estimate by more than the margin, or where "
                 "the estimate reads below the floor, at once; then hold it for horizon_s before the requested gait "
-                "is switched to again; after a switch your switching rule chose, catch for horizon_s only below "
+                "is switched to again (after a catch into one of catchers, hold it beyond horizon_s until the "
+                "trunk is calm: tilted less than calm.tilt_deg from upright, moving horizontally slower than "
+                "calm.speed_m_s and turning slower than calm.rate_rad_s, at most calm.wait_s after the catch); "
+                "after a switch your switching rule chose, catch for horizon_s only below "
                 "the floor",
     }, checksum=True)
