@@ -4,8 +4,9 @@ The transition-net scores switches from the states it was fitted on; two control
 gait's latent has barely felt it, so the gait the net offers most is no better a catch than staying
 (``benchmarks/guard_oracle.py``). The catch table instead names, for each running gait, the gait to catch into: each
 gait of the library is shoved once (a :class:`~gaitlib.evaluation.SinglePush` of ``impulse`` N s on ``episodes``
-worlds) and every world switched at once, ``delay`` control steps after its shove starts, into each other gait at its
-best destination phase (the calibrated net's, as the guard switches), kept to the episode's end. The worlds are
+worlds) and every world switched at once, ``delay`` control steps after its shove starts, into each other gait
+(or each of the candidates given, :attr:`CatchTableConfig.into`: a library's catch skill alone, say) at its best
+destination phase (the calibrated net's, as the guard switches), kept to the episode's end. The worlds are
 sorted by the sector of :data:`~gaitlib.evaluation.SECTORS` their trunk's acceleration points to at the catch
 (:func:`~gaitlib.strategies.survival.shove_sector`, what the guard reads then); in each sector, the gait whose
 catches fell least is the table's, if they fell less than staying did and the sector read at least
@@ -91,6 +92,9 @@ class CatchTableConfig:
     seed: int = 1000
     backend: str = "mujoco"
     falls: Falls = DEFAULT_FALLS
+    into: tuple[str, ...] | None = None
+    """The gaits a catch may go to (``None``: every gait); a running gait with none but itself among them is never
+    caught (no rollout is run for it)."""
 
     def __post_init__(self) -> None:
         if self.episodes < MIN_CATCH_WORLDS * len(SECTORS):
@@ -116,13 +120,17 @@ def timed_catch_falls(setup: SwitchingSetup, guard: Guard, gait: int, dest: int 
 def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfig, *, progress=None) -> dict:
     """The catch table of ``setup``'s gaits (module doc): JSON-ready, with every rollout's falls per sector."""
     gaits = setup.gaits
+    into = [setup.gait_index(name) for name in config.into] if config.into is not None else range(len(gaits))
+    dests = {g: [d for d in into if d != g] for g in range(len(gaits))}
     falls: dict[str, dict[str, dict[str, int]]] = {}
     worlds: dict[str, dict[str, int]] = {}
     agreement: dict[str, float] = {}
-    done, total = 0, len(gaits) ** 2
+    done, total = 0, sum(len(d) + 1 for d in dests.values() if d)
     for g, name in enumerate(gaits):
+        if not dests[g]:
+            continue
         fell = {}
-        for d in [-1, *(d for d in range(len(gaits)) if d != g)]:
+        for d in [-1, *dests[g]]:
             fell["stay" if d == -1 else gaits[d]], catching = timed_catch_falls(
                 setup, guard, g, d, impulse_ns=config.impulse_ns, episodes=config.episodes,
                 delay_steps=config.delay_steps, seed=config.seed + g, backend=config.backend, falls=config.falls)
@@ -149,4 +157,5 @@ def fit_catch_table(setup: SwitchingSetup, guard: Guard, config: CatchTableConfi
         "episodes": config.episodes, "min_worlds": MIN_CATCH_WORLDS,
         "impulse_ns": config.impulse_ns, "delay_steps": config.delay_steps,
         "seed": config.seed, "falls_definition": Falls(config.falls).value,
+        "into": None if config.into is None else list(config.into),
     }

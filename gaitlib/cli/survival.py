@@ -135,14 +135,16 @@ def catches_command(
                         bounds=SEED),
     backend: str = typer.Option("mujoco", "--backend", help="auto, mujoco or newton."),
     falls: str = falls_option(),
+    into: str | None = typer.Option(None, "--into", help="Comma-separated gaits a catch may go to (default: every "
+                                    "gait); a gait with no other among them is never caught."),
     library: Path | None = _WRITTEN,
     replace: bool = typer.Option(False, "--replace", help="Write into a protected library (refused without it)."),
     as_json: bool = typer.Option(False, "--json", help="Print the table as one JSON object."),
 ) -> None:
     """Measure where the guard catches each gait to and write it into the library's survival estimate: every gait
-    shoved once, caught --delay steps later into each other gait in turn; in each direction of shove, the one that
-    fell least is its catch where it fell less than staying (docs/switching.md, "The guard"). The library is held
-    for the whole run: a refit of the estimate meanwhile is refused."""
+    shoved once, caught --delay steps later into each other gait (or each of --into) in turn; in each direction of
+    shove, the one that fell least is its catch where it fell less than staying (docs/switching.md, "The guard").
+    The library is held for the whole run: a refit of the estimate meanwhile is refused."""
     from gaitlib.atomic import file_sha256
     from gaitlib.benchmark.catches import CatchTableConfig, fit_catch_table
     from gaitlib.library import Library
@@ -150,10 +152,16 @@ def catches_command(
     from gaitlib.meta import load_switching
     from gaitlib.strategies.survival import save_catch_table
 
+    names = None if into is None else tuple(dict.fromkeys(n.strip() for n in into.split(",") if n.strip()))
+    if names == ():
+        raise OptionError("--into names no gait")
     config = CatchTableConfig(impulse_ns=impulse, episodes=episodes, delay_steps=delay, seed=seed, backend=backend,
-                              falls=falls)
+                              falls=falls, into=names)
     target, copy_from = _writing(library, replace=replace, command="gaitlib survival catches", what="the catch table")
-    load_switching(copy_from or target).guard()  # no survival estimate, a stale or damaged one: one line, no work
+    checked = load_switching(copy_from or target)
+    checked.guard()  # no survival estimate, a stale or damaged one: one line, no work
+    for name in names or ():
+        checked.gait_index(name)  # a gait the library lacks: one line, no work
     if copy_from is not None:
         copy_library(copy_from, target)
     with library_writer(target, command="gaitlib survival catches"):
@@ -189,7 +197,8 @@ def export_command(
     setup = load_switching(library)
     guard = setup.guard()  # no survival estimate, or a stale or damaged one: one line, before anything is written
     path = export_guard(out, policies=[e.policy for e in setup.entries], estimate=guard.estimate,
-                        net=setup.resources.net, calibration=setup.resources.calibration)
+                        net=setup.resources.net, calibration=setup.resources.calibration,
+                        catchers=tuple(e.name for e in setup.entries if e.description.task == "catch"))
     print(f"{path} (and the ONNX files beside it): horizon {number_text(guard.horizon_s)} s, margin "
           f"{number_text(guard.margin)}")
 

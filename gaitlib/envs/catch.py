@@ -28,6 +28,9 @@ from gaitlib.rotations import quat_rotate_inverse
 from gaitlib.sim import SimState
 
 __all__ = [
+    "CALM_RATE_RAD_S",
+    "CALM_SPEED_M_S",
+    "CALM_TILT_DEG",
     "CATCH_EPISODE_S",
     "CATCH_REWARD",
     "CatchStep",
@@ -37,6 +40,7 @@ __all__ = [
     "calm_rates",
     "catch_reward",
     "fell",
+    "is_calm",
     "pd_torque",
     "stance",
     "still",
@@ -47,6 +51,15 @@ __all__ = [
 CATCH_EPISODE_S = 2.5
 """A catch episode's length, s: ABS trains its recovery policy on 2 s episodes; half a second more lets a robot
 caught late in a 30 N s shove finish its steps and stand still before the time-out."""
+CALM_TILT_DEG = 10.0
+"""A calm trunk leans less than this from upright, deg: a third of the 30 deg of roll and pitch ABS's recovery
+episodes start from (``go1_rec_config.py``)."""
+CALM_SPEED_M_S = 0.5
+"""A calm trunk moves horizontally slower than this, m/s: sqrt of the :func:`still` kernel's sigma (0.25 (m/s)^2)
+in :data:`CATCH_REWARD`, where the reward has fallen to 1/e of standing still."""
+CALM_RATE_RAD_S = 1.0
+"""A calm trunk rolls, pitches and turns slower than this, rad/s: sqrt of the :func:`calm_rates` kernel's sigma
+(1 (rad/s)^2) in :data:`CATCH_REWARD`, its 1/e point."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,3 +173,16 @@ def catch_reward(
     name."""
     values = {t.name: t.value(step) for t in terms}
     return dt * sum(t.weight * values[t.name] for t in terms), values
+
+
+def is_calm(state: SimState) -> torch.Tensor:
+    """(N,) bool: the trunk is calm, the moment a catch hands the robot back (:class:`~gaitlib.meta.MetaController`):
+    tilted less than :data:`CALM_TILT_DEG`, moving horizontally slower than :data:`CALM_SPEED_M_S` and turning slower
+    than :data:`CALM_RATE_RAD_S`. A robot reads the tilt and the rates from its IMU and the speed from its state
+    estimator."""
+    down = torch.zeros_like(state.root_lin_vel)
+    down[:, 2] = -1.0
+    lean = quat_rotate_inverse(state.root_quat, down)[:, :2].norm(dim=-1)
+    return ((lean < torch.sin(torch.deg2rad(torch.tensor(CALM_TILT_DEG)))) &
+            (state.root_lin_vel[:, :2].norm(dim=-1) < CALM_SPEED_M_S) &
+            (state.root_ang_vel.norm(dim=-1) < CALM_RATE_RAD_S))

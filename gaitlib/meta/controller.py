@@ -1,6 +1,9 @@
 """The meta-controller (paper Algorithm 1): every control step (30 Hz) the active policy of each world acts; a
 world with a queued policy asks the strategy whether to switch now and at which destination phase, and switches
 when it says so, or when the request has waited ``deadline_s`` (forced, at the strategy's best candidate).
+A world its guard caught into a catch skill (a gait of ``catchers``) holds it past the guard's horizon until it is
+calm (:func:`gaitlib.envs.catch.is_calm`), at most :data:`CALM_WAIT_S` after the catch, then returns to the requested
+gait through the normal switch.
 
 Works on any :class:`~gaitlib.envs.ImitationEnv` (any backend, any number of worlds) whose gaits are the library
 policies given, in the same order.
@@ -14,15 +17,19 @@ from dataclasses import dataclass, field
 import torch
 
 from gaitlib.envs import ImitationEnv
+from gaitlib.envs.catch import CATCH_EPISODE_S, is_calm
 from gaitlib.envs.observations import ObservationBatch
 from gaitlib.library.policy import GaitPolicy, per_gait
 from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
 
-__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
+__all__ = ["CALM_WAIT_S", "DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
 
 DEADLINE_S = 2.0
 """A request not acted on within this time is forced, s."""
+CALM_WAIT_S = CATCH_EPISODE_S
+"""Longest a world caught into a catch skill waits to be calm before it returns, s: the catch skill's training
+episode (what it learnt to do after a catch is done by then)."""
 
 
 @dataclass(frozen=True)
@@ -100,10 +107,12 @@ class MetaController:
         deadline_s: float = DEADLINE_S,
         candidates: int | None = None,
         guard: Guard | None = None,
+        catchers: tuple[int, ...] = (),
     ) -> None:
         """``policies[g]`` drives ``env``'s gait g. ``typical_value`` (G,) divides destination critic values for
         strategies that need values (required by them). ``guard``: catch worlds about to fall
-        (:mod:`gaitlib.meta.guard`); ``None``: unguarded."""
+        (:mod:`gaitlib.meta.guard`); ``None``: unguarded. ``catchers``: the gaits that are catch skills (a world
+        caught into one holds it until calm)."""
         if len(policies) != len(env.clips):
             raise ValueError(f"{len(policies)} policies for an environment of {len(env.clips)} gaits")
         if strategy.needs_value and typical_value is None:
@@ -128,6 +137,11 @@ class MetaController:
         """(N,) control steps the guard still leaves a world alone after a switch the strategy chose (not a forced
         one): the score that chose it counted the horizon after it, as a catch's offer does."""
         self._hold_steps = round(guard.horizon_s / env.dt) if guard is not None else 0
+        self.catchers = torch.zeros(len(env.clips), dtype=torch.bool, device=env.device)
+        self.catchers[list(catchers)] = True
+        self.calm_wait = torch.zeros(n, dtype=torch.long, device=env.device)
+        """(N,) control steps a world caught into a catch skill may still wait to be calm once its hold is over."""
+        self._calm_wait_steps = round(CALM_WAIT_S / env.dt)
         self.stay = torch.full((n,), float("nan"), device=env.device)
         """(N,) the survival estimate the guard read at the last step (NaN unguarded)."""
         self._pending: dict[int, CatchEvent] = {}  # world -> its last catch, until the requested gait runs again
@@ -256,6 +270,8 @@ class MetaController:
                 self.requested[world], self._pending[world] = catch.requested, catch
                 self.queued[world] = -1
                 self.hold[world] = self._hold_steps
+                if bool(self.catchers[catch.dest]):
+                    self.calm_wait[world] = self._calm_wait_steps - self._hold_steps
         return catches
 
     def _return(self, dones: torch.Tensor) -> None:
@@ -264,7 +280,13 @@ class MetaController:
         env = self.env
         self.hold = (self.hold - 1).clamp(min=0)
         self.settle = (self.settle - 1).clamp(min=0)
-        self.hold[dones], self.settle[dones] = 0, 0
+        self.hold[dones], self.settle[dones], self.calm_wait[dones] = 0, 0, 0
+        waiting = (self.hold == 0) & (self.calm_wait > 0)
+        if waiting.any():  # held one more step where the catch skill has not calmed the robot yet
+            calm = is_calm(env.sim_state).to(waiting.device)
+            self.calm_wait[waiting & calm] = 0
+            self.calm_wait[waiting & ~calm] -= 1
+            self.hold[waiting & ~calm] = 1
         self.requested[dones] = -1
         for world in dones.nonzero().squeeze(1).tolist():
             self._pending.pop(world, None)

@@ -91,7 +91,9 @@ class SwitchingSetup:
             torch.as_tensor(self.resources.table.typical_value, dtype=torch.float32) if chosen.needs_value else None
         )
         policies = [e.policy.to(env.device) for e in self.entries]
-        return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s, guard=guard)
+        catchers = tuple(g for g, e in enumerate(self.entries) if e.description.task == "catch")
+        return MetaController(env, policies, chosen, typical_value=typical, deadline_s=deadline_s, guard=guard,
+                              catchers=catchers)
 
 
 def load_switching(library: Library | Path | None = None) -> SwitchingSetup:
