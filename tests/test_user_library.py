@@ -72,7 +72,7 @@ def test_training_a_gait_leaves_the_shipped_library_and_the_readme_main_job_alon
     assert f"--pairs {','.join(ordered_pairs(gaits))} " in stale[0]
     assert git("status", "--porcelain", "--", "library", cwd=fresh_copy) == ""
     mine = Library(fresh_copy / "runs" / "library")
-    assert mine.gaits() == gaits and len(gaits) == 13
+    assert mine.gaits() == gaits and len(gaits) == 14
     training = mine.entry("stand").metadata["training"]
     assert training["iterations"] == 1 and training["preset"]["name"] == "cpu" and training["preset"]["num_envs"] == 64
     assert mine.entry("stand").metadata["evaluation"]["seconds"] == 1.0
@@ -129,13 +129,14 @@ def test_the_tests_preset_stays_out_of_a_library_of_trained_gaits(tmp_path) -> N
 
 
 @pytest.mark.parametrize(("folder", "gaits"), [
-    ("library", ("bound", "pace", "pronk", "sidestep_left", "sidestep_right", "stand", "trot", "trot_back",
+    ("library", ("bound", "catch", "pace", "pronk", "sidestep_left", "sidestep_right", "stand", "trot", "trot_back",
                  "trot_in_place", "trot_left", "trot_right", "turn_left", "walk")),
     ("library-switch-start", ("bound", "pace", "pronk", "stand", "trot", "walk")),
     ("library-paper", ("pace", "stand", "trot")),
 ])
 def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
-    """The shipped library (six gaits, the recovery skill and six steering skills) and the two shipped before it
+    """The shipped library (six gaits, the recovery skill, six steering skills and the catch skill) and the two
+    shipped before it
     (switch-start, the paper's recipe): every gait's policy, every ordered pair covered by switching models fitted on
     these very policies (identities and checksums agree), nothing to fix."""
     status = json.loads(gaitlib_quick("library", "--library", str(REPO / folder), "--json").stdout)
@@ -147,34 +148,41 @@ def test_every_library_in_the_repository_is_whole(folder, gaits) -> None:
 def test_growing_the_library_left_its_entries_as_they_were() -> None:
     """The six gaits are the policies the library's stored evidence measured before it grew by the recovery skill,
     and the seven entries those the route measurement of the seven recorded before it grew by the steering skills
-    (every measurement records each policy's identity): each growth added its skills and changed no entry. The
-    steering skills are those of their staging folders, byte for byte."""
+    and the thirteen entries those the growth's benchmark recorded before it grew by the catch skill (every
+    measurement records each policy's identity): each growth added its skills and changed no entry. The steering
+    skills and the catch skill are those of their staging folders, byte for byte."""
     grown = Library(REPO / "library")
     results = REPO / "docs" / "results"
     six = json.loads((results / "library" / "bench-0n.json").read_text())["result"]["library_identities"]
     seven = json.loads((results / "recover" / "routes.json").read_text())["result"]["policies"]
     assert len(six) == 6 and {gait: grown.identities()[gait] for gait in six} == six
     assert set(seven) - set(six) == {"trot_in_place"} and {gait: grown.identities()[gait] for gait in seven} == seven
-    steering = set(grown.gaits()) - set(seven)
+    thirteen = json.loads((results / "growth" / "bench-fitted-0n.json").read_text())["result"]["library_identities"]
+    assert len(thirteen) == 13 and {gait: grown.identities()[gait] for gait in thirteen} == thirteen
+    assert set(grown.gaits()) - set(thirteen) == {"catch"}
+    steering = set(thirteen) - set(seven)
     assert steering == {"sidestep_left", "sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"}
-    for gait in steering:
-        staged = REPO / ("library-mirror" if gait == "sidestep_left" else "library-steer") / gait
+    staging = {"sidestep_left": "library-mirror", "catch": "library-catch"}
+    for gait in steering | {"catch"}:
+        staged = REPO / staging.get(gait, "library-steer") / gait
         assert all((grown.root / gait / name).read_bytes() == (staged / name).read_bytes()
                    for name in ("metadata.json", "policy.pt", "policy.onnx")), gait
 
 
 def test_the_grown_libraries_old_pairs_are_served_by_the_net_fitted_before_it_grew() -> None:
-    """The shipped transition-net is a composite of two fits (gaitlib fit --extend): the first serves the seven
+    """The shipped transition-net is a composite of three fits (gaitlib fit --extend): the first serves the seven
     entries' 42 pairs and was fitted on their policies (the identities its route measurement recorded), the second
-    the 114 pairs with a steering skill; the TMT and calibration hold the same pairs' entries."""
+    the 114 pairs with a steering skill, the third the 26 pairs with the catch skill."""
     from gaitlib.transition_net import load_parts
 
     lib = Library(REPO / "library")
     seven = json.loads((REPO / "docs" / "results" / "recover" / "routes.json").read_text())["result"]["policies"]
-    old, new = load_parts(lib.net_path, identities=lib.identities(), sources=())
+    old, new, catch = load_parts(lib.net_path, identities=lib.identities(), sources=())
     assert {f"{m}-{n}" for m, n in old.pairs} == set(ordered_pairs(tuple(seven)))
     assert old.metadata["library_identities"] == seven
     assert len(new.pairs) == 114 and not set(old.pairs) & set(new.pairs)
+    assert len(catch.pairs) == 26 and all("catch" in pair for pair in catch.pairs)
+    assert not (set(old.pairs) | set(new.pairs)) & set(catch.pairs)
 
 
 @pytest.mark.parametrize(("folder", "skills", "problems"), [
@@ -208,27 +216,36 @@ def test_the_shipped_library_is_the_recipe_and_the_table_its_readme_gives() -> N
     README's commands (the recovery skill with its kicks of 1.5 m/s; the mirrored sidestep_left made from the trained
     sidestep_right), and its stored evaluation is the stored evidence of the quality bar (and, for the seven first
     entries, the README's table row); the walk, the bound and the pronk from the states of this library's own trot,
-    pace and stand; its switching models drive all 156 pairs of the thirteen entries as they are, labelled the field's
-    way, and its survival estimate is current. It ships no route table (measured with the models before it grew)."""
+    pace and stand; the catch skill with its catch task, trained without kicks from the states of the seven first
+    entries; its switching models drive all 182 pairs of the fourteen entries as they are, labelled the field's way,
+    and its survival estimate is current, its catch table catching into the catch skill alone. It ships no route table
+    (measured with the models before it grew)."""
     from gaitlib.strategies.survival import load_survival
 
     lib = Library(REPO / "library")
     status = library_status(lib)
-    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 13
-    assert status.problems == () and len(status.pairs) == 156 and set(status.pairs.values()) == {"covered"}
+    assert [g.problem for g in status.gaits] == [None] * len(status.gaits) and len(status.gaits) == 14
+    assert status.problems == () and len(status.pairs) == 182 and set(status.pairs.values()) == {"covered"}
     assert set(status.falls().values()) == {"trunk"}
-    assert load_survival(lib, status.bundle.gaits).horizon_s > 0
+    estimate = load_survival(lib, status.bundle.gaits)
+    assert estimate.horizon_s > 0 and estimate.info["catches"]["into"] == ["catch"]
+    assert {d for row in estimate.info["catches"]["catch_into"].values() for d in row.values()} == {"catch"}
     assert not (lib.switching_dir / "routes.json").exists()
     results = REPO / "docs" / "results"
     recipe, readme = readme_recipe(lib.root / "README.md"), (lib.root / "README.md").read_text()
     identities = lib.identities()
     assert recipe.push_kind == "kick" and recipe.falls == "trunk"
-    evidence = {"trot_in_place": "recover", "sidestep_left": "mirror",
+    evidence = {"trot_in_place": "recover", "sidestep_left": "mirror", "catch": "catch",
                 **dict.fromkeys(("sidestep_right", "trot_back", "trot_left", "trot_right", "turn_left"), "steer")}
     for gait in lib.gaits():
         metadata = json.loads((lib.root / gait / "metadata.json").read_text())
         if gait == "sidestep_left":  # the mirror image of the trained sidestep_right
             assert metadata["training"]["mirror"]["source_sha256"] == identities["sidestep_right"]
+        elif gait == "catch":  # the catch task: the recipe without its kicks, from the seven first entries' states
+            assert metadata["description"]["task"] == "catch"
+            assert Recipe.from_record(metadata["training"]["recipe"]) == dataclasses.replace(recipe, kick_max=0.0)
+            start = metadata["training"]["switch_start"]
+            assert start["from_identities"] == {g: identities[g] for g in start["from_gaits"]} and len(start) > 0
         else:
             skill = gait == "trot_in_place"  # the recovery skill: the recipe but for its larger kicks
             assert Recipe.from_record(metadata["training"]["recipe"]) == (
