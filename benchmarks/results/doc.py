@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks.results.budget import budget_table, screen_table
+from benchmarks.results.catch_skill import catch_alone, guard_with_catch
 from benchmarks.results.drive import drive_table
 from benchmarks.results.entries import entries_table
 from benchmarks.results.evidence import EVIDENCE, ROOT, shown
@@ -82,10 +83,11 @@ PAGES = {
     "docs/ablation.md": ("robustness-gaits", "robust-library"),
     "docs/switching_results.md": ("pairs-0n", "routes", "routes-switch-start", "map", "net-accuracy-switch-start"),
     "docs/transitions.md": ("net-curve", "budget-curve", "budget-curve-50n", "budget-screen", "growth-stages"),
-    "docs/skills.md": ("skills-bar", "skills-shoves"),
+    "docs/skills.md": ("skills-bar", "skills-shoves", "catch-alone"),
     "docs/switching.md": ("guard-curve-recover", "guard-shoves-recover", "guard-pushes-recover", "guard-pairs-recover",
-                          "guard-pairs-menagerie-recover", "guard-shoves-grown"),
-    "docs/results_history.md": ("guard-shoves-best-f0", "guard-pushes-best-f0"),
+                          "guard-pairs-menagerie-recover", "guard-shoves-grown", "guard-catch",
+                          "guard-pushes-catch"),
+    "docs/results_history.md": ("guard-shoves-best-f0", "guard-pushes-best-f0", "guard-summary-recover"),
     "docs/benchmarks.md": ("sim-throughput", "recipe-speed", "collect-throughput", "backend-memory", "guard-cost",
                            "transition-writes", "command-start", "command-start-policy", "suite-latest", "entry-load",
                            "gpu-check-h100", "gpu-check-graph"),
@@ -151,7 +153,11 @@ def render_tables(evidence_dir: Path = EVIDENCE, accuracy: Path = ACCURACY,
                  for kind, table in (("shoves", guard_shoves), ("pushes", guard_pushes))},
               "guard-curve-recover": guard_curve("recover", Path(evidence_dir).parent / "guard"),
               "guard-shoves-grown": guard_shoves("grown", Path(evidence_dir).parent / "guard"),
-              "guard-summary": guard_summary("recover", Path(evidence_dir).parent / "guard"),
+              "catch-alone": catch_alone(Path(evidence_dir).parent / "catch"),
+              "guard-catch": guard_with_catch(Path(evidence_dir).parent / "guard"),
+              "guard-summary": guard_summary("catch", Path(evidence_dir).parent / "guard"),
+              "guard-summary-recover": guard_summary("recover", Path(evidence_dir).parent / "guard"),
+              "guard-pushes-catch": guard_pushes("catch", Path(evidence_dir).parent / "guard"),
               **{f"guard-pairs-{'' if robot == 'sim' else robot + '-'}recover":
                  guard_pairs("recover", Path(evidence_dir).parent / "guard", robot=robot) for robot in PAIR_TABLES},
               "recipe-speed": recipe_speed_table(Path(evidence_dir) / "recipe-speed.json"),

@@ -68,9 +68,10 @@ there (97% at 0 N) and pooled 99% at 0 N, 95% at 50 N."""
 
 def _gaits(folder: Path, pattern: str) -> list[str]:
     """The gaits with a file ``pattern`` (``{gait}`` in it) in ``folder``: the shipped ones in :data:`GAITS`' order,
-    then any other by name."""
+    then any other by name (a name with a hyphen is another tag's file: no gait's name has one)."""
     prefix, suffix = pattern.split("{gait}")
     found = {p.name[len(prefix):len(p.name) - len(suffix)] for p in Path(folder).glob(pattern.replace("{gait}", "*"))}
+    found = {name for name in found if "-" not in name}
     return [g for g in GAITS if g in found] + sorted(found - set(GAITS))
 
 
