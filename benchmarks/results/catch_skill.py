@@ -82,14 +82,16 @@ def guard_with_catch(folder: Path = GUARD) -> str:
                 same = before["result"]["unguarded_points"][0]["by_sector"] == off["by_sector"]
                 today = _rate(point["falls"], point["episodes"], goal) + ("" if same else " (other draws)")
             into = sum(c["to"] == "catch" for c in on["guard"]["catches"])
+            over = on["falls"] / on["episodes"] - goal
+            verdict = "met" if over <= 0 else f"missed by {pct(over)} points"
             rows.append(f"| {gait} | {impulse} N s | {_rate(off['falls'], off['episodes'])} | {today} | "
                         f"{_rate(on['falls'], on['episodes'], goal)} | {len(on['guard']['catches'])} ({into}; "
-                        f"{on['guard']['false_catches']}) |")
+                        f"{on['guard']['false_catches']}) | {verdict} |")
     if not rows:
         return not_yet(Path(folder) / "shove-12-GAIT-catch.json")
     return "\n".join([
         "| entry | shove | unguarded | guarded, the gaits before | guarded, with the catch skill | catches (into the "
-        "catch skill; false) |", "|---|---|---|---|---|---|", *rows, "",
+        "catch skill; false) | goal, with the catch skill |", "|---|---|---|---|---|---|---|", *rows, "",
         f"Falls (% of {', '.join(f'{n:,}' for n in sorted(episodes))} episodes a row, 95% Wilson intervals) after one "
         "shove of 0.1 s in a random direction, the same draws in every column (seed 0): unguarded; guarded by the "
         "thirteen entries' guard (`shove-IMPULSE-GAIT-grown.json`); guarded by the guard of the library with the "

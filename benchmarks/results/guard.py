@@ -277,10 +277,11 @@ def _verdict(points: dict[str, dict], goal: float) -> str:
     return "met" if len(met) == len(points) else f"met by {len(met)} of {len(points)}"
 
 
-def guard_summary(tag: str, folder: Path = GUARD) -> str:
+def guard_summary(tag: str, folder: Path = GUARD, *, section: str = "Where the guard stands") -> str:
     """The guard against its goals, one row a measure, unguarded and guarded: one shove of 12 and of 18 N s, the
     paper's pushes of up to 50 N, every pair at 0 N and under 50 N pushes on both A1 models, false catches unpushed
-    and the README's six-gait sequence over 100 seeds; from the same stored evaluations as the detailed tables."""
+    and the README's six-gait sequence over 100 seeds; from the same stored evaluations as the detailed tables (in
+    ``section`` of ``docs/switching.md``)."""
     folder = Path(folder)
     rows = []
     for impulse in (12, 18):
@@ -377,5 +378,5 @@ def guard_summary(tag: str, folder: Path = GUARD) -> str:
     return "\n".join([
         "| measure | unguarded | guarded | goal (guarded) |", "|---|---|---|---|", *rows, "",
         "Falls by the `trunk` definition with 95% Wilson intervals, the same draws both ways (seed 0). Evidence: "
-        f"`{shown(folder)}/*-{tag}.json` (the detailed tables of `docs/switching.md`, \"Where the guard stands\"), "
+        f"`{shown(folder)}/*-{tag}.json` (the detailed tables of `docs/switching.md`, \"{section}\"), "
         "each with its command."])
