@@ -24,7 +24,8 @@ def _shipped_speeds() -> dict[str, float]:
     speeds = {}
     for path in sorted(SHIPPED.glob("*/metadata.json")):
         description = json.loads(path.read_text())["description"]
-        if description.get("lateral_speed", 0.0) == 0.0 and description.get("yaw_rate", 0.0) == 0.0:
+        straight = description.get("lateral_speed", 0.0) == 0.0 and description.get("yaw_rate", 0.0) == 0.0
+        if straight and description.get("task", "imitation") != "catch":  # the catch skill is no commanded skill
             speeds[path.parent.name] = description["forward_speed"]
     return speeds
 

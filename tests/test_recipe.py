@@ -168,13 +168,14 @@ def test_every_lever_is_an_option_recorded_in_the_entry(tmp_path) -> None:
 def test_the_defaults_are_the_shipped_librarys_recipe(tmp_path) -> None:
     """``gaitlib train`` without a lever option trains with :class:`Recipe`'s defaults, and they are the recipe every
     gait of the shipped library was trained with, so a gait added to it is trained as its gaits were (its recovery
-    skill with larger kicks, its one lever changed; its mirrored sidestep_left trained not at all, but made from the
-    trained sidestep_right)."""
+    skill with larger kicks, its one lever changed; its catch skill without kicks, from shoved starts; its mirrored
+    sidestep_left trained not at all, but made from the trained sidestep_right)."""
     shipped = Library()
     training = {gait: shipped.entry(gait).metadata["training"] for gait in shipped.gaits()}
     assert training.pop("sidestep_left")["mirror"]["source"] == "sidestep_right"
     recipes = {gait: Recipe.from_record(record["recipe"]) for gait, record in training.items()}
     assert recipes.pop("trot_in_place") == dataclasses.replace(Recipe(), kick_max=1.5)
+    assert recipes.pop("catch") == dataclasses.replace(Recipe(), kick_max=0.0)
     assert len(recipes) == 11 and set(recipes.values()) == {Recipe()}
     library = tmp_path / "library"
     trained = gaitlib_quick("train", "stand", "--preset", "tiny", "--iterations", "1", "--eval-episodes", "2",

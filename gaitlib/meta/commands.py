@@ -110,8 +110,9 @@ class Skill:
 
 
 def skills_of(descriptions: Sequence[GaitDescription]) -> list[Skill]:
-    """The skills of gaits described by ``descriptions``, in their order."""
-    return [Skill(d.name, (d.forward_speed, d.lateral_speed, d.yaw_rate)) for d in descriptions]
+    """The skills of gaits described by ``descriptions``, in their order; a catch skill is none (it comes to the stance
+    of a robot the guard hands it, at no velocity a command asks for: the stand is the skill of a halt)."""
+    return [Skill(d.name, (d.forward_speed, d.lateral_speed, d.yaw_rate)) for d in descriptions if d.task != "catch"]
 
 
 def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
