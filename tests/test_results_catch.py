@@ -41,12 +41,13 @@ def test_each_entry_shoved_three_ways_from_small_evidence(tmp_path: Path) -> Non
     _store(tmp_path, "shove-12-catch-catch", {"points": [caught], "unguarded_points": [unguarded]})
     _store(tmp_path, "shove-12-pace-imu-catch", {"points": [], "unguarded_points": []})  # another tag's: not read
     lines = guard_with_catch(tmp_path).splitlines()
-    assert lines[2] == "| pace | 12 N s | 3.9% [2.9, 5.3] | 4.9% [3.7, 6.4] | **0.8% [0.4, 1.5]** | 2 (1; 1) | met |"
+    assert lines[2] == ("| pace | 12 N s | 3.9% [2.9, 5.3] | 4.9% [3.7, 6.4] | **0.8% [0.4, 1.5]** | left, 8 of 256 | "
+                        "2 (1; 1) | met pooled; left missed by 2.1 points |")
     assert lines[3] == ("| walk | 12 N s | 3.9% [2.9, 5.3] | **0.5% [0.2, 1.1]** (other draws) | **0.8% [0.4, 1.5]** "
-                        "| 2 (1; 1) | met |")
+                        "| left, 8 of 256 | 2 (1; 1) | met pooled; left missed by 2.1 points |")
     assert lines[4].startswith("| catch | 12 N s | 3.9% [2.9, 5.3] | - (not in the library before) |")
-    _store(tmp_path, "shove-18-pace-catch", {"points": [_guarded_shove(150, {}, [], impulse=18.0)],
+    _store(tmp_path, "shove-18-pace-catch", {"points": [_guarded_shove(150, {"right": 150}, [], impulse=18.0)],
                                              "unguarded_points": [unguarded]})
-    assert guard_with_catch(tmp_path).splitlines()[5].endswith("| missed by 4.6 points |")  # 14.6% against 10%
+    assert guard_with_catch(tmp_path).splitlines()[5].endswith("| missed by 4.6 points; right by 48.6 |")
     assert lines[5] == ""
     assert guard_with_catch(tmp_path / "none").startswith("Not yet measured:")
