@@ -99,8 +99,8 @@ def guard_with_catch(folder: Path = GUARD) -> str:
     if not rows:
         return not_yet(Path(folder) / "shove-12-GAIT-catch.json")
     return "\n".join([
-        "| entry | shove | unguarded | guarded, the gaits before | guarded, with the catch skill | worst direction, with "
-        "the catch skill | catches (into the catch skill; false) | goal, with the catch skill |",
+        "| entry | shove | unguarded | guarded, the gaits before | guarded, with the catch skill | worst direction, "
+        "with the catch skill | catches (into the catch skill; false) | goal: pooled, each direction |",
         "|---|---|---|---|---|---|---|---|", *rows, "",
         f"Falls (% of {', '.join(f'{n:,}' for n in sorted(episodes))} episodes a row, 95% Wilson intervals) after one "
         "shove of 0.1 s in a random direction (a direction: the quarter the shove points to, about 128 episodes), "
