@@ -11,10 +11,10 @@ import torch
 
 import gaitlib.meta.controller as controller
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.catch import is_calm
+from gaitlib.envs.catch import CALM_WAIT_S, is_calm
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
-from gaitlib.meta.controller import CALM_WAIT_S, MetaController
+from gaitlib.meta.controller import MetaController
 from gaitlib.meta.guard import Guard
 from gaitlib.sim import make_backend
 from gaitlib.strategies import get_strategy

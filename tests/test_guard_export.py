@@ -16,12 +16,11 @@ import pytest
 import torch
 
 from gaitlib.envs import EnvConfig
-from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, is_calm
+from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, CALM_WAIT_S, is_calm
 from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS
 from gaitlib.library import Library
 from gaitlib.meta import load_switching
-from gaitlib.meta.controller import CALM_WAIT_S
 from gaitlib.rotations import quat_multiply, quat_rotate_inverse
 from gaitlib.sim import make_backend
 from gaitlib.strategies.base import SwitchQuery

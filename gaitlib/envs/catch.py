@@ -16,6 +16,7 @@ written in: a fall then costs ``dt * 100`` besides the alive reward it forgoes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -31,6 +32,7 @@ __all__ = [
     "CALM_RATE_RAD_S",
     "CALM_SPEED_M_S",
     "CALM_TILT_DEG",
+    "CALM_WAIT_S",
     "CATCH_EPISODE_S",
     "CATCH_REWARD",
     "CatchStep",
@@ -60,6 +62,9 @@ in :data:`CATCH_REWARD`, where the reward has fallen to 1/e of standing still.""
 CALM_RATE_RAD_S = 1.0
 """A calm trunk rolls, pitches and turns slower than this, rad/s: sqrt of the :func:`calm_rates` kernel's sigma
 (1 (rad/s)^2) in :data:`CATCH_REWARD`, its 1/e point."""
+CALM_WAIT_S = CATCH_EPISODE_S
+"""Longest a robot caught into a catch skill waits to be calm before it is handed back, s: the catch skill's training
+episode (what it learnt to do after a catch is done by then)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -183,6 +188,6 @@ def is_calm(state: SimState) -> torch.Tensor:
     down = torch.zeros_like(state.root_lin_vel)
     down[:, 2] = -1.0
     lean = quat_rotate_inverse(state.root_quat, down)[:, :2].norm(dim=-1)
-    return ((lean < torch.sin(torch.deg2rad(torch.tensor(CALM_TILT_DEG)))) &
+    return ((lean < math.sin(math.radians(CALM_TILT_DEG))) &
             (state.root_lin_vel[:, :2].norm(dim=-1) < CALM_SPEED_M_S) &
             (state.root_ang_vel.norm(dim=-1) < CALM_RATE_RAD_S))

@@ -2,8 +2,8 @@
 world with a queued policy asks the strategy whether to switch now and at which destination phase, and switches
 when it says so, or when the request has waited ``deadline_s`` (forced, at the strategy's best candidate).
 A world its guard caught into a catch skill (a gait of ``catchers``) holds it past the guard's horizon until it is
-calm (:func:`gaitlib.envs.catch.is_calm`), at most :data:`CALM_WAIT_S` after the catch, then returns to the requested
-gait through the normal switch.
+calm (:func:`gaitlib.envs.catch.is_calm`), at most :data:`~gaitlib.envs.catch.CALM_WAIT_S` after the catch, then
+returns to the requested gait through the normal switch.
 
 Works on any :class:`~gaitlib.envs.ImitationEnv` (any backend, any number of worlds) whose gaits are the library
 policies given, in the same order.
@@ -17,19 +17,16 @@ from dataclasses import dataclass, field
 import torch
 
 from gaitlib.envs import ImitationEnv
-from gaitlib.envs.catch import CATCH_EPISODE_S, is_calm
+from gaitlib.envs.catch import CALM_WAIT_S, is_calm
 from gaitlib.envs.observations import ObservationBatch
 from gaitlib.library.policy import GaitPolicy, per_gait
 from gaitlib.meta.guard import CatchEvent, Guard
 from gaitlib.strategies import Strategy, SwitchQuery, phase_grid
 
-__all__ = ["CALM_WAIT_S", "DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
+__all__ = ["DEADLINE_S", "MetaController", "MetaStep", "SwitchDetail", "SwitchEvent"]
 
 DEADLINE_S = 2.0
 """A request not acted on within this time is forced, s."""
-CALM_WAIT_S = CATCH_EPISODE_S
-"""Longest a world caught into a catch skill waits to be calm before it returns, s: the catch skill's training
-episode (what it learnt to do after a catch is done by then)."""
 
 
 @dataclass(frozen=True)

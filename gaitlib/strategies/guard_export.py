@@ -38,7 +38,7 @@ from pathlib import Path
 import torch
 
 from gaitlib.atomic import atomic_path, write_json
-from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, CATCH_EPISODE_S
+from gaitlib.envs.catch import CALM_RATE_RAD_S, CALM_SPEED_M_S, CALM_TILT_DEG, CALM_WAIT_S
 from gaitlib.errors import GaitlibError
 from gaitlib.evaluation import SECTORS
 from gaitlib.strategies.base import phase_grid
@@ -53,9 +53,6 @@ DEPLOYABLE_INPUTS = (("latent", "phase"), ("latent", "phase", "imu"))
 """The survival inputs a robot-side loop computes from its own observations and IMU."""
 _FORMAT = {"format": "gaitlib.guard_export", "format_version": 5}
 """2: armed_from_s, catch_into; 3: imu, sectors; 4: floor; 5: catchers, calm."""
-_CALM_WAIT_S = CATCH_EPISODE_S
-"""The meta-controller's ``CALM_WAIT_S``, s (a layer above this one: the catch skill's episode, as there;
-``tests/test_guard_export.py`` checks that they agree)."""
 
 
 class _Latent(torch.nn.Module):
@@ -157,7 +154,7 @@ def export_guard(folder: Path, *, policies: list, estimate: SurvivalEstimate, ne
         "candidates": phase_grid().tolist(),
         "catchers": [g for g in gaits if g in catchers],
         "calm": {"tilt_deg": CALM_TILT_DEG, "speed_m_s": CALM_SPEED_M_S, "rate_rad_s": CALM_RATE_RAD_S,
-                 "wait_s": _CALM_WAIT_S},
+                 "wait_s": CALM_WAIT_S},
         "rule": "from armed_from_s after the start on, catch into the gait whose best calibrated offer (the "
                 "catch_into table's gait for the running gait and the sector the trunk's acceleration points to, "
                 "where there is a table) beats the calibrated survival estimate by more than the margin, or where "
