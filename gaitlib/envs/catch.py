@@ -105,9 +105,14 @@ def alive(step: CatchStep) -> torch.Tensor:
 def tilt(step: CatchStep) -> torch.Tensor:
     """|g_xy|^2, the horizontal part of gravity's direction in the trunk frame: 0 upright, sin^2 of the tilt
     (1 at 90 deg); legged_gym's ``_reward_orientation``."""
-    down = torch.zeros_like(step.state.root_lin_vel)
+    return _leaning(step.state).square().sum(-1)
+
+
+def _leaning(state: SimState) -> torch.Tensor:
+    """(N, 2) the horizontal part of gravity's direction in the trunk frame: its norm is the sine of the tilt."""
+    down = torch.zeros_like(state.root_lin_vel)
     down[:, 2] = -1.0
-    return quat_rotate_inverse(step.state.root_quat, down)[:, :2].square().sum(-1)
+    return quat_rotate_inverse(state.root_quat, down)[:, :2]
 
 
 def still(step: CatchStep, *, sigma: float) -> torch.Tensor:
@@ -185,9 +190,6 @@ def is_calm(state: SimState) -> torch.Tensor:
     tilted less than :data:`CALM_TILT_DEG`, moving horizontally slower than :data:`CALM_SPEED_M_S` and turning slower
     than :data:`CALM_RATE_RAD_S`. A robot reads the tilt and the rates from its IMU and the speed from its state
     estimator."""
-    down = torch.zeros_like(state.root_lin_vel)
-    down[:, 2] = -1.0
-    lean = quat_rotate_inverse(state.root_quat, down)[:, :2].norm(dim=-1)
-    return ((lean < math.sin(math.radians(CALM_TILT_DEG))) &
+    return ((_leaning(state).norm(dim=-1) < math.sin(math.radians(CALM_TILT_DEG))) &
             (state.root_lin_vel[:, :2].norm(dim=-1) < CALM_SPEED_M_S) &
             (state.root_ang_vel.norm(dim=-1) < CALM_RATE_RAD_S))
